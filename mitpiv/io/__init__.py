@@ -1,0 +1,6 @@
+"""File formats: EXR images with JSON metadata, particle PLY files and truth files."""
+
+from mitpiv.io.exr import read_exr, write_exr
+from mitpiv.io.particles import read_particles_ply, read_truth, write_particles_ply, write_truth
+
+__all__ = ["read_exr", "write_exr", "write_particles_ply", "read_particles_ply", "write_truth", "read_truth"]

@@ -1,0 +1,171 @@
+"""Particle files: PLY for Mitsuba's ``ellipsoids`` shape, NPZ/CSV ground truth.
+
+PLY layout (binary little-endian, one ``vertex`` per particle, all float32), as Mitsuba's
+``ellipsoids`` shape expects: ``x y z nx ny nz diameter scale_0 scale_1 scale_2 rot_0 rot_1
+rot_2 rot_3``. ``x y z`` is the centre [mm]; ``diameter`` the physical diameter [um]
+(exposed by the shape as the attribute ``diameter``); ``scale_i = ln(proxy radius [mm])``
+(Mitsuba applies an exponential); the quaternion is the identity. The proxy sphere only
+makes particles visible to camera rays: the ``tracer_particles`` emitter normalises its
+radiance by the proxy's projected area, so images do not depend on the proxy radius.
+Scenes must set ``<float name="extent" value="1"/>`` on the shape so that the proxy radius
+is the stored one (any extent works physically; 1 keeps it as written).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+from mitpiv.errors import ConfigError, FileFormatError, check_positive
+from mitpiv.io.atomic import atomic_path
+
+__all__ = ["write_particles_ply", "read_particles_ply", "write_truth", "read_truth", "PLY_FIELDS"]
+
+PLY_FIELDS = ("x", "y", "z", "nx", "ny", "nz", "diameter", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
+
+
+def write_particles_ply(path, positions_mm, diameters_um, *, proxy_radius_mm: float) -> Path:
+    """Write particles as a PLY file that Mitsuba's ``ellipsoids`` shape reads (atomic).
+
+    Parameters
+    ----------
+    positions_mm : (N, 3) array
+        Particle centres [mm].
+    diameters_um : (N,) array or float
+        Physical diameters [um].
+    proxy_radius_mm : float
+        Radius of the proxy sphere [mm] used for camera-ray intersection. Choose it
+        well below the pixel footprint (e.g. 0.1-0.3 of it).
+    """
+    pos = np.asarray(positions_mm, dtype=np.float64)
+    if pos.ndim != 2 or pos.shape[1] != 3:
+        raise ConfigError(f"write_particles_ply: positions_mm must have shape (N, 3), got {pos.shape}.")
+    n = pos.shape[0]
+    diam = np.broadcast_to(np.asarray(diameters_um, dtype=np.float64), (n,))
+    if not np.all(np.isfinite(pos)):
+        raise ConfigError("write_particles_ply: positions_mm contain non-finite values.")
+    if n and not np.all(diam > 0):
+        raise ConfigError("write_particles_ply: diameters_um must all be > 0.")
+    r = check_positive("proxy_radius_mm", proxy_radius_mm, owner="write_particles_ply", unit="mm")
+    data = np.zeros((n, len(PLY_FIELDS)), dtype="<f4")
+    data[:, 0:3] = pos
+    data[:, 6] = diam
+    data[:, 7:10] = np.log(r)
+    data[:, 10] = 1.0  # quaternion (w, x, y, z) = identity: rot_0 is the real part
+    header = (
+        "ply\nformat binary_little_endian 1.0\n"
+        "comment mitpiv tracer particles: x y z [mm], diameter [um], scale = ln(proxy radius [mm])\n"
+        f"element vertex {n}\n" + "".join(f"property float {f}\n" for f in PLY_FIELDS) + "end_header\n"
+    )
+    path = Path(path)
+    with atomic_path(path, suffix=".ply") as tmp:
+        with open(tmp, "wb") as f:
+            f.write(header.encode("ascii"))
+            f.write(data.tobytes())
+    return path
+
+
+def read_particles_ply(path) -> dict:
+    """Read a particle PLY written by :func:`write_particles_ply`.
+
+    Returns a dict with ``positions_mm`` (N, 3), ``diameters_um`` (N,) and
+    ``proxy_radius_mm`` (N,). Raises :class:`FileFormatError` for a missing or malformed file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileFormatError(f"particle file {str(path)!r} does not exist.")
+    raw = path.read_bytes()
+    end = raw.find(b"end_header\n")
+    if not raw.startswith(b"ply\n") or end < 0:
+        raise FileFormatError(f"particle file {str(path)!r} is not a PLY file (no 'ply' / 'end_header').")
+    lines = raw[:end].decode("ascii", "replace").splitlines()
+    if "format binary_little_endian 1.0" not in lines:
+        raise FileFormatError(f"particle file {str(path)!r} must be binary little-endian PLY.")
+    count = None
+    props = []
+    for ln in lines:
+        parts = ln.split()
+        if parts[:2] == ["element", "vertex"]:
+            count = int(parts[2])
+        elif parts[:1] == ["property"]:
+            if parts[1] != "float":
+                raise FileFormatError(f"particle file {str(path)!r}: property {parts[-1]} must be float.")
+            props.append(parts[-1])
+    if count is None or tuple(props) != PLY_FIELDS:
+        raise FileFormatError(
+            f"particle file {str(path)!r} has properties {props}; expected {list(PLY_FIELDS)}."
+        )
+    body = raw[end + len(b"end_header\n") :]
+    need = count * len(PLY_FIELDS) * 4
+    if len(body) != need:
+        raise FileFormatError(
+            f"particle file {str(path)!r} is truncated or padded: {len(body)} data bytes for "
+            f"{count} particles ({need} expected)."
+        )
+    data = np.frombuffer(body, dtype="<f4").reshape(count, len(PLY_FIELDS)).astype(np.float64)
+    return {
+        "positions_mm": data[:, 0:3].copy(),
+        "diameters_um": data[:, 6].copy(),
+        "proxy_radius_mm": np.exp(data[:, 7]),
+    }
+
+
+def write_truth(path, *, positions_mm, times_s, diameters_um, flow: dict | None = None, extra: dict | None = None) -> Path:
+    """Write ground truth for F frames of N particles (atomic).
+
+    ``.npz``: arrays ``positions_mm`` (F, N, 3), ``times_s`` (F,), ``diameters_um`` (N,),
+    ``displacements_mm`` (F-1, N, 3) between consecutive frames, and JSON ``flow``/``extra``.
+    ``.csv``: one row per particle with positions of every frame and the displacement
+    from the first to the last frame.
+    """
+    pos = np.asarray(positions_mm, dtype=np.float64)
+    if pos.ndim != 3 or pos.shape[2] != 3:
+        raise ConfigError(f"write_truth: positions_mm must have shape (F, N, 3), got {pos.shape}.")
+    times = np.asarray(times_s, dtype=np.float64).reshape(-1)
+    if times.shape[0] != pos.shape[0]:
+        raise ConfigError(f"write_truth: {pos.shape[0]} frames but {times.shape[0]} times.")
+    diam = np.broadcast_to(np.asarray(diameters_um, dtype=np.float64), (pos.shape[1],))
+    path = Path(path)
+    if path.suffix == ".npz":
+        with atomic_path(path, suffix=".npz") as tmp:
+            with open(tmp, "wb") as f:
+                np.savez_compressed(
+                    f,
+                    positions_mm=pos,
+                    times_s=times,
+                    diameters_um=diam,
+                    displacements_mm=np.diff(pos, axis=0),
+                    flow=json.dumps(flow or {}),
+                    extra=json.dumps(extra or {}),
+                )
+    elif path.suffix == ".csv":
+        with atomic_path(path, suffix=".csv") as tmp:
+            with open(tmp, "w", newline="") as f:
+                w = csv.writer(f)
+                cols = ["id", "diameter_um"]
+                for k in range(pos.shape[0]):
+                    cols += [f"x{k}_mm", f"y{k}_mm", f"z{k}_mm"]
+                cols += ["dx_mm", "dy_mm", "dz_mm"]
+                w.writerow(cols)
+                disp = pos[-1] - pos[0]
+                rows = np.column_stack([np.arange(pos.shape[1]), diam, *[pos[k] for k in range(pos.shape[0])], disp])
+                for row in rows:
+                    w.writerow([int(row[0])] + [repr(float(v)) for v in row[1:]])
+    else:
+        raise ConfigError(f"write_truth: file name must end in .npz or .csv, got {str(path)!r}.")
+    return path
+
+
+def read_truth(path) -> dict:
+    """Read an NPZ truth file written by :func:`write_truth`."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileFormatError(f"truth file {str(path)!r} does not exist.")
+    with np.load(path) as z:
+        out = {k: z[k] for k in ("positions_mm", "times_s", "diameters_um", "displacements_mm")}
+        out["flow"] = json.loads(str(z["flow"]))
+        out["extra"] = json.loads(str(z["extra"]))
+    return out

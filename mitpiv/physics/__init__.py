@@ -1,0 +1,5 @@
+"""Pure NumPy physics: no renderer is imported here.
+
+Modules: ``distortion`` (Brown-Conrady), ``camera`` (pinhole camera model and camera
+placement), ``sheet`` (laser-sheet profiles), ``seeding``, ``flows``, ``advection``.
+"""

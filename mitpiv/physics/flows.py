@@ -1,0 +1,334 @@
+"""Analytic and gridded flows as callables ``u = flow(p_world_mm, t_s)`` in mm/s.
+
+Every flow takes points of shape (N, 3) [mm] and a time [s] and returns velocities of
+shape (N, 3) [mm/s], vectorised. ``flow.to_dict()`` / :func:`flow_from_dict` let a truth
+file rebuild the flow, so it can be evaluated at any query point later.
+
+Axisymmetric flows are defined in a frame with origin ``center`` and symmetry axis
+``axis``; ``r`` is the distance from the axis and ``z`` the coordinate along it.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import RegularGridInterpolator
+
+from mitpiv.errors import ConfigError, FileFormatError, check_positive
+
+__all__ = [
+    "Flow",
+    "Uniform",
+    "SolidBody",
+    "LambOseen",
+    "Burgers",
+    "HillVortex",
+    "VortexRing",
+    "ABC",
+    "GridFlow",
+    "flow_from_dict",
+]
+
+
+def _unit(v, name: str) -> np.ndarray:
+    a = np.asarray(v, dtype=float).reshape(3)
+    n = np.linalg.norm(a)
+    if n == 0:
+        raise ConfigError(f"flow: '{name}' must be a non-zero vector, got {a.tolist()}.")
+    return a / n
+
+
+class Flow:
+    """Base class: subclasses implement ``velocity(p, t)``."""
+
+    kind = "flow"
+
+    def __call__(self, p_world_mm, t_s: float = 0.0) -> np.ndarray:
+        p = np.asarray(p_world_mm, dtype=float)
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise ConfigError(f"flow: points must have shape (N, 3), got {p.shape}.")
+        return self.velocity(p, float(t_s))
+
+    def velocity(self, p: np.ndarray, t: float) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def to_dict(self) -> dict:
+        d = {"kind": self.kind}
+        for k, v in self.__dict__.items():
+            if k.startswith("_"):
+                continue
+            d[k] = v.tolist() if isinstance(v, np.ndarray) else v
+        return d
+
+
+class _Axisymmetric(Flow):
+    def __init__(self, center, axis):
+        self.center = np.asarray(center, dtype=float).reshape(3)
+        self.axis = _unit(axis, "axis")
+
+    def _cyl(self, p, center=None):
+        c = self.center if center is None else center
+        rel = p - c
+        z = rel @ self.axis
+        radial = rel - z[:, None] * self.axis
+        r = np.linalg.norm(radial, axis=1)
+        safe = np.where(r > 0, r, 1.0)
+        e_r = radial / safe[:, None]
+        e_t = np.cross(self.axis, e_r)
+        return r, z, e_r, e_t
+
+
+class Uniform(Flow):
+    """Uniform translation ``u = velocity_mm_s``."""
+
+    kind = "uniform"
+
+    def __init__(self, velocity_mm_s=(1.0, 0.0, 0.0)):
+        self.velocity_mm_s = np.asarray(velocity_mm_s, dtype=float).reshape(3)
+
+    def velocity(self, p, t):
+        return np.broadcast_to(self.velocity_mm_s, p.shape).copy()
+
+
+class SolidBody(_Axisymmetric):
+    """Solid-body rotation ``u = omega axis x (p - center)``, omega [rad/s]."""
+
+    kind = "solid_body"
+
+    def __init__(self, omega_rad_s=1.0, center=(0, 0, 0), axis=(0, 0, 1)):
+        super().__init__(center, axis)
+        self.omega_rad_s = float(omega_rad_s)
+
+    def velocity(self, p, t):
+        return self.omega_rad_s * np.cross(self.axis, p - self.center)
+
+
+class LambOseen(_Axisymmetric):
+    """Lamb-Oseen vortex: ``u_theta = G / (2 pi r) (1 - exp(-r^2 / rc^2))``.
+
+    circulation_mm2_s: G [mm^2/s]; core_radius_mm: rc [mm].
+    """
+
+    kind = "lamb_oseen"
+
+    def __init__(self, circulation_mm2_s=1000.0, core_radius_mm=1.0, center=(0, 0, 0), axis=(0, 0, 1)):
+        super().__init__(center, axis)
+        self.circulation_mm2_s = float(circulation_mm2_s)
+        self.core_radius_mm = check_positive("core_radius_mm", core_radius_mm, owner="LambOseen", unit="mm")
+
+    def _u_theta(self, r, rc2):
+        g = self.circulation_mm2_s
+        # (1 - exp(-x)) / r computed stably near the axis.
+        x = r * r / rc2
+        return g / (2 * math.pi) * np.where(r > 1e-12, -np.expm1(-x) / np.where(r > 0, r, 1.0), 0.0)
+
+    def velocity(self, p, t):
+        r, z, e_r, e_t = self._cyl(p)
+        return self._u_theta(r, self.core_radius_mm**2)[:, None] * e_t
+
+
+class Burgers(LambOseen):
+    """Burgers vortex: ``u_r = -a r / 2``, ``u_z = a z``,
+    ``u_theta = G / (2 pi r) (1 - exp(-a r^2 / (4 nu)))``.
+
+    strain_rate_1_s: a [1/s]; viscosity_mm2_s: nu [mm^2/s]. The core radius is
+    ``sqrt(4 nu / a)``.
+    """
+
+    kind = "burgers"
+
+    def __init__(self, circulation_mm2_s=1000.0, strain_rate_1_s=1.0, viscosity_mm2_s=1.0, center=(0, 0, 0), axis=(0, 0, 1)):
+        _Axisymmetric.__init__(self, center, axis)
+        self.circulation_mm2_s = float(circulation_mm2_s)
+        self.strain_rate_1_s = check_positive("strain_rate_1_s", strain_rate_1_s, owner="Burgers", unit="1/s")
+        self.viscosity_mm2_s = check_positive("viscosity_mm2_s", viscosity_mm2_s, owner="Burgers", unit="mm^2/s")
+
+    def to_dict(self) -> dict:
+        d = super().to_dict()
+        d.pop("core_radius_mm", None)
+        return d
+
+    def velocity(self, p, t):
+        a = self.strain_rate_1_s
+        r, z, e_r, e_t = self._cyl(p)
+        ut = self._u_theta(r, 4 * self.viscosity_mm2_s / a)
+        return (-0.5 * a * r)[:, None] * e_r + (a * z)[:, None] * self.axis + ut[:, None] * e_t
+
+
+class HillVortex(_Axisymmetric):
+    """Hill's spherical vortex of radius ``radius_mm`` translating at ``speed_mm_s``.
+
+    In the vortex frame (free stream ``-U`` along ``axis``), with ``R^2 = r^2 + z^2``:
+    inside ``u_z = 1.5 U (1 - (2 r^2 + z^2) / a^2)``, ``u_r = 1.5 U r z / a^2``; outside
+    ``u_z = U [(a/R)^5 (2 z^2 - r^2) / (2 a^2) - 1]``, ``u_r = 1.5 U (r z / a^2) (a/R)^5``.
+    With ``frame="lab"`` (default) ``U`` is added along the axis (fluid at rest far away)
+    and the vortex centre moves as ``center + U t axis``.
+    """
+
+    kind = "hill_vortex"
+
+    def __init__(self, radius_mm=5.0, speed_mm_s=100.0, center=(0, 0, 0), axis=(0, 0, 1), frame="lab"):
+        super().__init__(center, axis)
+        self.radius_mm = check_positive("radius_mm", radius_mm, owner="HillVortex", unit="mm")
+        self.speed_mm_s = float(speed_mm_s)
+        if frame not in ("lab", "vortex"):
+            raise ConfigError(f"HillVortex: 'frame' must be 'lab' or 'vortex', got {frame!r}.")
+        self.frame = frame
+
+    def velocity(self, p, t):
+        a, u0 = self.radius_mm, self.speed_mm_s
+        c = self.center + (u0 * t * self.axis if self.frame == "lab" else 0.0)
+        r, z, e_r, _ = self._cyl(p, c)
+        big_r2 = r * r + z * z
+        inside = big_r2 <= a * a
+        f5 = (a * a / np.maximum(big_r2, 1e-300)) ** 2.5
+        uz = np.where(inside, 1.5 * u0 * (1 - (2 * r * r + z * z) / a**2), u0 * (f5 * (2 * z * z - r * r) / (2 * a * a) - 1))
+        ur = np.where(inside, 1.5 * u0 * r * z / a**2, 1.5 * u0 * r * z / a**2 * f5)
+        if self.frame == "lab":
+            uz = uz + u0
+        return ur[:, None] * e_r + uz[:, None] * self.axis
+
+
+class VortexRing(_Axisymmetric):
+    """Thin vortex ring with a smooth (Rosenhead-Moore) core, translating along ``axis``.
+
+    The velocity is the Biot-Savart integral of a circular filament of radius
+    ``ring_radius_mm`` and circulation ``circulation_mm2_s`` with the regularised kernel
+    ``dl x (p - x') / (|p - x'|^2 + a^2)^(3/2)`` (``a = core_radius_mm``), which is the
+    curl of a vector potential and hence exactly divergence-free; the filament is split
+    into ``segments`` pieces. The ring moves at ``speed_mm_s``, by default Kelvin's
+    self-induced speed ``G / (4 pi R) (ln(8 R / a) - 1/4)``.
+    """
+
+    kind = "vortex_ring"
+
+    def __init__(
+        self,
+        ring_radius_mm=5.0,
+        circulation_mm2_s=5000.0,
+        core_radius_mm=1.0,
+        center=(0, 0, 0),
+        axis=(0, 0, 1),
+        speed_mm_s=None,
+        segments=256,
+    ):
+        super().__init__(center, axis)
+        self.ring_radius_mm = check_positive("ring_radius_mm", ring_radius_mm, owner="VortexRing", unit="mm")
+        self.core_radius_mm = check_positive("core_radius_mm", core_radius_mm, owner="VortexRing", unit="mm")
+        if self.core_radius_mm >= self.ring_radius_mm:
+            raise ConfigError(
+                f"VortexRing: core_radius_mm={core_radius_mm} must be smaller than "
+                f"ring_radius_mm={ring_radius_mm}."
+            )
+        self.circulation_mm2_s = float(circulation_mm2_s)
+        if speed_mm_s is None:
+            big_r, a = self.ring_radius_mm, self.core_radius_mm
+            speed_mm_s = self.circulation_mm2_s / (4 * math.pi * big_r) * (math.log(8 * big_r / a) - 0.25)
+        self.speed_mm_s = float(speed_mm_s)
+        self.segments = int(segments)
+        # Ring frame: two unit vectors orthogonal to the axis.
+        helper = np.array([1.0, 0, 0]) if abs(self.axis[0]) < 0.9 else np.array([0, 1.0, 0])
+        e1 = np.cross(self.axis, helper)
+        self._e1 = e1 / np.linalg.norm(e1)
+        self._e2 = np.cross(self.axis, self._e1)
+
+    def velocity(self, p, t):
+        big_r, a2 = self.ring_radius_mm, self.core_radius_mm**2
+        c = self.center + self.speed_mm_s * t * self.axis
+        phi = (np.arange(self.segments) + 0.5) * (2 * math.pi / self.segments)
+        xs = c + big_r * (np.cos(phi)[:, None] * self._e1 + np.sin(phi)[:, None] * self._e2)
+        dl = (2 * math.pi * big_r / self.segments) * (-np.sin(phi)[:, None] * self._e1 + np.cos(phi)[:, None] * self._e2)
+        out = np.empty_like(p)
+        chunk = max(1, 2_000_000 // self.segments)
+        for s in range(0, p.shape[0], chunk):  # chunks bound memory; each chunk is vectorised
+            rel = p[s : s + chunk, None, :] - xs[None, :, :]
+            den = (np.einsum("nmk,nmk->nm", rel, rel) + a2) ** 1.5
+            out[s : s + chunk] = np.einsum("nmk,nm->nk", np.cross(dl[None], rel), 1.0 / den)
+        return out * (self.circulation_mm2_s / (4 * math.pi))
+
+
+class ABC(Flow):
+    """Arnold-Beltrami-Childress flow, scaled to millimetres:
+    ``u = U0 (A sin(z/L) + C cos(y/L), B sin(x/L) + A cos(z/L), C sin(y/L) + B cos(x/L))``.
+    """
+
+    kind = "abc"
+
+    def __init__(self, A=1.0, B=1.0, C=1.0, length_mm=1.0, speed_mm_s=1.0):
+        self.A, self.B, self.C = float(A), float(B), float(C)
+        self.length_mm = check_positive("length_mm", length_mm, owner="ABC", unit="mm")
+        self.speed_mm_s = float(speed_mm_s)
+
+    def velocity(self, p, t):
+        x, y, z = (p / self.length_mm).T
+        u = self.A * np.sin(z) + self.C * np.cos(y)
+        v = self.B * np.sin(x) + self.A * np.cos(z)
+        w = self.C * np.sin(y) + self.B * np.cos(x)
+        return self.speed_mm_s * np.stack([u, v, w], axis=1)
+
+
+class GridFlow(Flow):
+    """A user velocity field on a regular grid, trilinearly interpolated (steady).
+
+    The NPZ file holds 1D axes ``x``, ``y``, ``z`` [mm] (strictly increasing) and arrays
+    ``u``, ``v``, ``w`` [mm/s] of shape (len(x), len(y), len(z)). Points outside the grid
+    raise :class:`ConfigError` unless ``outside="zero"``.
+    """
+
+    kind = "grid"
+
+    def __init__(self, path, outside="error"):
+        self.path = str(path)
+        if outside not in ("error", "zero"):
+            raise ConfigError(f"GridFlow: 'outside' must be 'error' or 'zero', got {outside!r}.")
+        self.outside = outside
+        p = Path(path)
+        if not p.is_file():
+            raise ConfigError(f"GridFlow: flow file {str(p)!r} does not exist.")
+        try:
+            data = np.load(p)
+            axes = [np.asarray(data[k], float) for k in ("x", "y", "z")]
+            comps = [np.asarray(data[k], float) for k in ("u", "v", "w")]
+        except (KeyError, ValueError, OSError) as e:
+            raise FileFormatError(
+                f"GridFlow: {str(p)!r} must be an NPZ with arrays x, y, z, u, v, w ({e})."
+            ) from None
+        shape = tuple(len(a) for a in axes)
+        for name, c in zip("uvw", comps):
+            if c.shape != shape:
+                raise FileFormatError(f"GridFlow: array '{name}' has shape {c.shape}, expected {shape}.")
+        for name, a in zip("xyz", axes):
+            if a.size < 2 or np.any(np.diff(a) <= 0):
+                raise FileFormatError(f"GridFlow: axis '{name}' must be strictly increasing with >= 2 points.")
+        self._interp = RegularGridInterpolator(
+            axes, np.stack(comps, axis=-1), method="linear", bounds_error=False, fill_value=np.nan
+        )
+        self._lo = np.array([a[0] for a in axes])
+        self._hi = np.array([a[-1] for a in axes])
+
+    def velocity(self, p, t):
+        out = self._interp(p)
+        bad = np.isnan(out[:, 0])
+        if bad.any():
+            if self.outside == "error":
+                raise ConfigError(
+                    f"GridFlow: {bad.sum()} point(s) lie outside the grid "
+                    f"[{self._lo.tolist()}, {self._hi.tolist()}] mm, e.g. {p[bad][0].tolist()}. "
+                    f"Extend the grid or use outside='zero'."
+                )
+            out[bad] = 0.0
+        return out
+
+
+_KINDS = {c.kind: c for c in (Uniform, SolidBody, LambOseen, Burgers, HillVortex, VortexRing, ABC, GridFlow)}
+
+
+def flow_from_dict(d: dict) -> Flow:
+    """Rebuild a flow from :meth:`Flow.to_dict` output (e.g. stored in a truth file)."""
+    d = dict(d)
+    kind = d.pop("kind", None)
+    if kind not in _KINDS:
+        raise ConfigError(f"flow: unknown kind {kind!r}; known: {sorted(_KINDS)}.")
+    return _KINDS[kind](**d)

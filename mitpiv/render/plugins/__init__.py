@@ -1,0 +1,24 @@
+"""mitpiv's Mitsuba plugins, one per module; each registers itself when imported.
+
+:func:`register_all` imports them for the active variant, and reloads a module whose
+classes were built for another variant (its base classes belong to that variant).
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+PLUGINS = ("laser_sheet", "tracer_particles", "distorted_pinhole", "particle_tracer")
+
+
+def register_all() -> None:
+    import mitsuba as mi
+
+    for name in PLUGINS:
+        full = f"{__name__}.{name}"
+        mod = sys.modules.get(full)
+        if mod is None:
+            importlib.import_module(full)
+        elif getattr(mod, "_VARIANT", None) != mi.variant():
+            importlib.reload(mod)

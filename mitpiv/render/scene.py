@@ -1,0 +1,152 @@
+"""Loading mitpiv scenes: ``$frame``/``$param`` substitution, input checks, plugin binding.
+
+A scene XML refers to per-frame particle files as ``particles_$frame.ply``; ``frame`` and
+any ``-D name=value`` parameter are substituted by Mitsuba's own ``$name`` mechanism.
+Before Mitsuba sees the file, every particle file the frame needs is checked (it exists and
+is a valid mitpiv PLY), so a missing frame gives a clear :class:`ConfigError`.
+"""
+
+from __future__ import annotations
+
+import re
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import mitsuba as mi
+import numpy as np
+
+from mitpiv.errors import ConfigError, FileFormatError, MitpivError
+from mitpiv.io.particles import read_particles_ply
+
+__all__ = ["load_scene", "load_dict", "bind_particle_shapes", "scene_defaults", "particle_files", "raise_plugin_error"]
+
+_PARTICLE_SHAPES = ("ellipsoidsmesh", "ellipsoids")
+
+
+def scene_defaults(xml_path) -> dict:
+    """``<default name=... value=...>`` entries of a scene file."""
+    root = _parse(xml_path)
+    return {d.get("name"): d.get("value") for d in root.iter("default")}
+
+
+def _parse(xml_path):
+    try:
+        return ET.parse(xml_path).getroot()
+    except ET.ParseError as e:
+        raise ConfigError(f"scene {str(xml_path)!r} is not valid XML: {e}.") from None
+
+
+def _substitute(text: str, values: dict) -> str:
+    return re.sub(r"\$(\w+)", lambda m: str(values.get(m.group(1), m.group(0))), text)
+
+
+def particle_files(xml_path, values: dict) -> list[Path]:
+    """Particle files (resolved paths) that a scene needs for the given parameter values."""
+    xml_path = Path(xml_path)
+    out = []
+    for shape in _parse(xml_path).iter("shape"):
+        if shape.get("type") not in _PARTICLE_SHAPES:
+            continue
+        for s in shape.findall("string"):
+            if s.get("name") == "filename":
+                p = Path(_substitute(s.get("value", ""), values))
+                out.append(p if p.is_absolute() else xml_path.parent / p)
+    return out
+
+
+def bind_particle_shapes(scene) -> list:
+    """Bind every ``tracer_particles`` emitter to its shape; return those emitters.
+
+    Also checks that particle shapes have a black BSDF (the emitter already carries the
+    scattered laser light; a reflective proxy would count it twice).
+    """
+    emitters = []
+    for shape in scene.shapes():
+        em = shape.emitter()
+        if em is None or not hasattr(em, "bind_shape"):
+            continue
+        em.bind_shape(shape)
+        bsdf = shape.bsdf()
+        params = mi.traverse(bsdf)
+        refl = [k for k in params.keys() if k.endswith("reflectance.value")]
+        if bsdf.class_name() != "SmoothDiffuse" or any(np.any(np.array(params[k]) != 0) for k in refl) or not refl:
+            raise ConfigError(
+                f"particle shape {shape.id()!r}: its BSDF must be black, e.g. "
+                f"<bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0\"/></bsdf>; the "
+                f"tracer_particles emitter already carries the scattered light."
+            )
+        emitters.append(em)
+    return emitters
+
+
+def raise_plugin_error(e: Exception, where: str):
+    """Re-raise a Mitsuba loading error as the mitpiv error it wraps, else as ConfigError.
+
+    Mitsuba turns exceptions raised in Python plugin constructors into ``RuntimeError``
+    whose text holds the traceback; the original class and message are recovered from it.
+    """
+    import mitpiv.errors as errors
+
+    msg = str(e)
+    found = re.findall(r"^(?:mitpiv\.errors\.)?(ConfigError|FileFormatError|BackendError|MitpivError): (.*)$", msg, re.M)
+    if found:
+        name, text = found[-1]
+        cls = getattr(errors, name, ConfigError)
+        raise cls(f"{text} (in {where})") from None
+    raise ConfigError(f"{where} failed to load: {msg.strip().splitlines()[0]}") from None
+
+
+def load_dict(d: dict):
+    """``mi.load_dict`` with mitpiv's error translation and particle binding."""
+    try:
+        obj = mi.load_dict(d)
+    except Exception as e:
+        raise_plugin_error(e, "scene dictionary")
+    if isinstance(obj, mi.Scene):
+        bind_particle_shapes(obj)
+    return obj
+
+
+def load_scene(xml_path, *, frame: int = 0, params: dict | None = None):
+    """Load a scene XML for one frame and bind mitpiv's plugins.
+
+    Parameters
+    ----------
+    xml_path : path
+        Scene file.
+    frame : int
+        Substituted for ``$frame``.
+    params : dict, optional
+        Further ``$name`` substitutions (values converted with ``str``).
+
+    Returns
+    -------
+    mitsuba.Scene
+    """
+    from mitpiv.render.variant import set_variant
+
+    if mi.variant() is None:
+        set_variant()
+    xml_path = Path(xml_path)
+    if not xml_path.is_file():
+        raise ConfigError(f"scene file {str(xml_path)!r} does not exist.")
+    values = {**scene_defaults(xml_path), **{k: str(v) for k, v in (params or {}).items()}, "frame": str(int(frame))}
+    for pf in particle_files(xml_path, values):
+        if not pf.is_file():
+            raise ConfigError(
+                f"frame {frame}: particle file {str(pf)!r} does not exist. Generate the "
+                f"particles for this frame (see the scene's README) or choose frames that exist."
+            )
+        try:
+            read_particles_ply(pf)
+        except FileFormatError as e:
+            raise ConfigError(f"frame {frame}: {e}") from None
+    kwargs = {k: v for k, v in values.items()}
+    try:
+        scene = mi.load_file(str(xml_path), **kwargs)
+    except MitpivError:
+        raise
+    except Exception as e:  # Mitsuba wraps plugin errors in RuntimeError
+        raise_plugin_error(e, f"scene {str(xml_path)!r} (frame {frame})")
+    bind_particle_shapes(scene)
+    return scene

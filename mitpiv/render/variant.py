@@ -1,0 +1,110 @@
+"""Mitsuba variant selection and plugin registration.
+
+``set_variant()`` picks ``cuda_ad_mono`` when a CUDA device works, else ``llvm_ad_mono``;
+the environment variable ``MITPIV_VARIANT`` overrides both. Dr.Jit's LLVM backend needs
+LLVM >= 16 (older versions fail to compile kernels with "Cannot select: fmaximum"): that
+is checked here, with an error naming the fix. mitpiv's plugins are registered for the
+variant, and re-registered by a variant callback whenever the variant changes.
+"""
+
+from __future__ import annotations
+
+import os
+
+from mitpiv.errors import BackendError, ConfigError
+
+__all__ = ["set_variant", "current_variant", "LLVM_FIX", "llvm_version"]
+
+MIN_LLVM = (16, 0, 0)
+SUPPORTED = ("llvm_ad_mono", "cuda_ad_mono")
+LLVM_FIX = (
+    "Install a newer LLVM and let Dr.Jit find it: on Debian/Ubuntu run "
+    "'sudo apt-get install libllvm19' (or set DRJIT_LIBLLVM_PATH to a libLLVM.so of "
+    "version >= 16). 'make setup' does this when run as root."
+)
+
+_callback_installed = False
+
+
+def llvm_version() -> tuple[int, int, int] | None:
+    """The LLVM version Dr.Jit loaded, or None if none could be loaded."""
+    import drjit as dr
+
+    try:
+        v = dr.detail.llvm_version()
+    except Exception:
+        return None
+    return tuple(int(x) for x in v) if v else None
+
+
+def _check_llvm() -> None:
+    v = llvm_version()
+    if v is None:
+        raise BackendError(f"Dr.Jit's LLVM backend found no libLLVM. {LLVM_FIX}")
+    if v < MIN_LLVM:
+        raise BackendError(
+            f"Dr.Jit loaded LLVM {'.'.join(map(str, v))}, which cannot compile its kernels "
+            f"(LLVM >= 16 is needed; older versions fail with 'Cannot select: fmaximum'). {LLVM_FIX}"
+        )
+
+
+def current_variant() -> str | None:
+    import mitsuba as mi
+
+    return mi.variant()
+
+
+def _on_variant_change(old, new) -> None:
+    if new is not None and new in SUPPORTED:
+        from mitpiv.render.plugins import register_all
+
+        register_all()
+
+
+def set_variant(name: str | None = None) -> str:
+    """Select the Mitsuba variant and register mitpiv's plugins for it.
+
+    Parameters
+    ----------
+    name : str, optional
+        ``"llvm_ad_mono"`` or ``"cuda_ad_mono"``. Default: ``$MITPIV_VARIANT`` if set,
+        else ``cuda_ad_mono`` when a CUDA device works, else ``llvm_ad_mono``.
+
+    Returns
+    -------
+    str
+        The variant now active.
+    """
+    global _callback_installed
+    import mitsuba as mi
+
+    requested = name or os.environ.get("MITPIV_VARIANT") or None
+    if requested is not None and requested not in SUPPORTED:
+        raise ConfigError(
+            f"set_variant: variant {requested!r} is not supported; use one of {', '.join(SUPPORTED)} "
+            f"(mitpiv's plugins need a vectorised '*_ad_mono' variant)."
+        )
+    if not _callback_installed:
+        mi.detail.add_variant_callback(_on_variant_change)
+        _callback_installed = True
+    if requested is None:
+        try:
+            mi.set_variant("cuda_ad_mono")
+            chosen = "cuda_ad_mono"
+        except Exception:
+            chosen = "llvm_ad_mono"
+    else:
+        chosen = requested
+    if chosen == "llvm_ad_mono":
+        _check_llvm()
+    if mi.variant() != chosen:
+        try:
+            mi.set_variant(chosen)
+        except Exception as e:
+            raise BackendError(f"set_variant: Mitsuba variant {chosen!r} cannot be used here: {e}") from None
+    else:
+        # The callback only fires on a change; make sure plugins exist for this variant.
+        from mitpiv.render.plugins import register_all
+
+        register_all()
+    return chosen
