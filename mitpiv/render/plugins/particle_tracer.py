@@ -79,7 +79,7 @@ class ParticleTracer(mi.CppADIntegrator):
         rays = self.rays_for(sensor)
         splats = 0
         for k, emitter in enumerate(self.particle_emitters(scene)):
-            center, _, diameter = emitter.particle_arrays()
+            center, radius, diameter = emitter.particle_arrays()
             n = dr.width(diameter)
             if n == 0:
                 continue
@@ -96,7 +96,9 @@ class ParticleTracer(mi.CppADIntegrator):
             ds, w_sensor = sensor.sample_direction(it, sample, True)
             active = ds.pdf > 0
             if self.occlusion:
-                ray = it.spawn_ray_to(ds.p)
+                # Start outside the particle's own proxy shell (circumradius < 1.3 R).
+                skip = 1.5 * dr.gather(mi.Float, radius, pid)
+                ray = mi.Ray3f(it.p + ds.d * skip, ds.d, ds.dist - skip, it.time, it.wavelengths)
                 active &= ~scene.ray_test(ray, active)
             intensity = emitter.intensity(it.p, dr.gather(mi.Float, diameter, pid), ds.d, it.wavelengths, active)
             value = intensity * w_sensor[0] * (n_pix / rays)

@@ -1,0 +1,146 @@
+"""Analytic flows: properties each must have (independent checks by finite differences)."""
+
+import numpy as np
+import pytest
+
+from mitpiv.errors import ConfigError, FileFormatError
+from mitpiv.physics import flows as F
+
+
+def divergence(flow, p, h=1e-4, t=0.0):
+    div = np.zeros(len(p))
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = h
+        div += (flow(p + e, t)[:, k] - flow(p - e, t)[:, k]) / (2 * h)
+    return div
+
+
+def curl(flow, p, h=1e-5):
+    J = np.zeros((len(p), 3, 3))  # J[:, i, k] = du_i / dx_k
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = h
+        J[:, :, k] = (flow(p + e) - flow(p - e)) / (2 * h)
+    return np.stack([J[:, 2, 1] - J[:, 1, 2], J[:, 0, 2] - J[:, 2, 0], J[:, 1, 0] - J[:, 0, 1]], axis=1)
+
+
+RNG = np.random.default_rng(3)
+PTS = RNG.uniform(-12, 12, (400, 3))
+
+SOLENOIDAL = [
+    F.Uniform((1, 2, 3)),
+    F.SolidBody(2.0, center=(1, 0, 0), axis=(0, 1, 1)),
+    F.LambOseen(500.0, 2.0, axis=(1, 0, 0)),
+    F.Burgers(500.0, 0.5, 1.0),
+    F.VortexRing(6.0, 800.0, 1.5, axis=(0, 1, 0), segments=512),
+    F.ABC(1.0, 0.7, 0.4, length_mm=3.0, speed_mm_s=10.0),
+]
+
+
+@pytest.mark.parametrize("flow", SOLENOIDAL, ids=lambda f: f.kind)
+def test_divergence_free(flow):
+    u_scale = np.abs(flow(PTS)).max()
+    # central differences: truncation O(h^2); relative to |u|/length the error is < 1e-6
+    assert np.abs(divergence(flow, PTS)).max() < 1e-5 * max(u_scale, 1.0)
+
+
+def test_hill_vortex_divergence_free_away_from_boundary_and_continuous_across_it():
+    hv = F.HillVortex(radius_mm=5.0, speed_mm_s=100.0)
+    r = np.linalg.norm(PTS, axis=1)
+    away = PTS[np.abs(r - 5.0) > 1e-2]
+    assert np.abs(divergence(hv, away)).max() < 1e-5 * 150
+    d = RNG.normal(size=(200, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    inside = hv(d * 5.0 * (1 - 1e-10))
+    outside = hv(d * 5.0 * (1 + 1e-10))
+    np.testing.assert_allclose(inside, outside, atol=1e-6)
+    # the vortex moves at U in the lab frame: fluid at rest far away, 1.5 U + U at the centre
+    # far field of a translating sphere is a dipole: |u| ~ U (a/R)^3
+    assert np.abs(hv(np.array([[0, 0, 500.0]]))).max() == pytest.approx(100 * (5 / 500) ** 3, rel=1e-6)
+    np.testing.assert_allclose(hv(np.array([[0, 0, 0.0]])), [[0, 0, 250.0]], atol=1e-9)
+
+
+def test_lamb_oseen_circulation_and_core():
+    g, rc = 700.0, 1.5
+    lo = F.LambOseen(g, rc)
+    th = np.linspace(0, 2 * np.pi, 2001)[:-1]
+    for r in (0.5, 1.5, 30.0):
+        p = np.stack([r * np.cos(th), r * np.sin(th), np.zeros_like(th)], 1)
+        tangent = np.stack([-np.sin(th), np.cos(th), np.zeros_like(th)], 1)
+        circ = np.sum(np.einsum("ij,ij->i", lo(p), tangent)) * r * (2 * np.pi / th.size)
+        assert circ == pytest.approx(g * (1 - np.exp(-(r**2) / rc**2)), rel=1e-9)
+    assert np.all(np.isfinite(lo(np.zeros((1, 3)))))
+
+
+def loop_circulation(flow, center, half, n=4000):
+    """Circulation around a square loop in the x-z plane (axis y)."""
+    s = np.linspace(-half, half, n + 1)
+    mid = 0.5 * (s[1:] + s[:-1])
+    ds = s[1] - s[0]
+    cx, cz = center
+    total = 0.0
+    for pts, t in (
+        (np.stack([cx + mid, 0 * mid, cz - half + 0 * mid], 1), (1, 0, 0)),
+        (np.stack([cx + half + 0 * mid, 0 * mid, cz + mid], 1), (0, 0, 1)),
+        (np.stack([cx - mid, 0 * mid, cz + half + 0 * mid], 1), (-1, 0, 0)),
+        (np.stack([cx - half + 0 * mid, 0 * mid, cz - mid], 1), (0, 0, -1)),
+    ):
+        total += np.sum(flow(pts) @ np.array(t, float)) * ds
+    return total
+
+
+def test_vortex_ring_circulation():
+    g, big_r, a = 1000.0, 6.0, 0.5
+    ring = F.VortexRing(big_r, g, a, axis=(0, 0, 1), segments=1024)
+    # loop in the meridional x-z plane around the core at x = R (links the ring once)
+    # The regularised core's vorticity has algebraic tails: the deficit falls as ~ G a^2 / L^2.
+    deficit = {h: g - abs(loop_circulation(ring, (big_r, 0.0), half=h)) for h in (2.0, 4.0, 5.0)}
+    assert 0 < deficit[5.0] < 1.5 * g * a**2 / 5.0**2
+    assert 2.5 < deficit[2.0] / deficit[4.0] < 5.0  # ~4 for a 1/L^2 law
+    # a loop that does not link the ring has zero circulation
+    assert abs(loop_circulation(ring, (big_r + 8.0, 0.0), half=2.0)) < 1e-3 * g
+    # Kelvin's self-induced speed is the default translation
+    assert ring.speed_mm_s == pytest.approx(g / (4 * np.pi * big_r) * (np.log(8 * big_r / a) - 0.25))
+
+
+def test_abc_is_beltrami():
+    abc = F.ABC(1.0, 0.8, 0.6, length_mm=1.0, speed_mm_s=1.0)
+    np.testing.assert_allclose(curl(abc, PTS[:50] / 4), abc(PTS[:50] / 4), atol=1e-8)
+
+
+def test_burgers_components():
+    b = F.Burgers(circulation_mm2_s=0.0, strain_rate_1_s=2.0, viscosity_mm2_s=1.0)
+    np.testing.assert_allclose(b(np.array([[3.0, 0, 2.0]])), [[-3.0, 0.0, 4.0]], atol=1e-12)
+
+
+def test_grid_flow_trilinear_is_exact_for_linear_fields(tmp_path):
+    x, y, z = np.linspace(0, 4, 5), np.linspace(-2, 2, 6), np.linspace(0, 1, 3)
+    X, Y, Z = np.meshgrid(x, y, z, indexing="ij")
+    np.savez(tmp_path / "f.npz", x=x, y=y, z=z, u=2 * X + Y, v=-Z, w=X * 0 + 3)
+    g = F.GridFlow(tmp_path / "f.npz")
+    p = RNG.uniform([0, -2, 0], [4, 2, 1], (100, 3))
+    np.testing.assert_allclose(g(p), np.stack([2 * p[:, 0] + p[:, 1], -p[:, 2], 3 + 0 * p[:, 0]], 1), atol=1e-12)
+    with pytest.raises(ConfigError, match="outside the grid"):
+        g(np.array([[10.0, 0, 0]]))
+    np.testing.assert_allclose(F.GridFlow(tmp_path / "f.npz", outside="zero")(np.array([[10.0, 0, 0]])), 0)
+    np.savez(tmp_path / "bad.npz", x=x, y=y, z=z, u=X)
+    with pytest.raises(FileFormatError, match="x, y, z, u, v, w"):
+        F.GridFlow(tmp_path / "bad.npz")
+    with pytest.raises(ConfigError, match="does not exist"):
+        F.GridFlow(tmp_path / "missing.npz")
+
+
+@pytest.mark.parametrize("flow", SOLENOIDAL + [F.HillVortex()], ids=lambda f: f.kind)
+def test_flow_round_trips_through_dict(flow):
+    rebuilt = F.flow_from_dict(flow.to_dict())
+    np.testing.assert_allclose(rebuilt(PTS, 0.01), flow(PTS, 0.01), rtol=1e-12)
+
+
+def test_bad_flow_parameters():
+    with pytest.raises(ConfigError, match="core_radius_mm"):
+        F.VortexRing(5.0, 100.0, 6.0)
+    with pytest.raises(ConfigError, match="axis"):
+        F.LambOseen(axis=(0, 0, 0))
+    with pytest.raises(ConfigError, match=r"shape \(N, 3\)"):
+        F.Uniform()(np.zeros(3))

@@ -1,0 +1,54 @@
+"""Small scenes for rendering tests, built as dictionaries."""
+
+import mitsuba as mi
+import numpy as np
+
+from mitpiv.io import write_particles_ply
+from mitpiv.physics.camera import PinholeCamera, look_at_rotation
+from mitpiv.render.scene import load_dict
+
+
+def camera(res=(48, 48), offset=(0.0, 0.0, 0.0), **kw):
+    pos = np.array([0.0, 0.0, 500.0]) + offset
+    rot = look_at_rotation(pos, np.asarray(offset, float), up=[0, 1, 0])
+    return PinholeCamera(res, 85.0, 10.0, rotation=rot, position_mm=pos, **kw)
+
+
+def scene(tmp_path, positions, *, cam=None, sensor="distorted_pinhole", sensor_props=None, integrator=None,
+          rfilter=None, proxy=0.01, diameters=2.0, sheet=None, name="p.ply"):
+    cam = cam or camera()
+    write_particles_ply(tmp_path / name, np.asarray(positions, float), diameters, proxy_radius_mm=proxy)
+    s = {"type": sensor, "to_world": mi.ScalarTransform4f(cam.to_world_mitsuba()),
+         "film": {"type": "hdrfilm", "width": cam.resolution[0], "height": cam.resolution[1],
+                  "pixel_format": "luminance", "rfilter": rfilter or {"type": "box"}}}
+    if sensor == "perspective":
+        s["fov"] = float(np.degrees(2 * np.arctan(cam.resolution[0] / 2 / cam.focal_px)))
+        s["near_clip"], s["far_clip"] = 0.01, 1e7
+    else:
+        s["focal_length_mm"], s["pixel_pitch_um"] = cam.focal_length_mm, cam.pixel_pitch_um
+    s.update(sensor_props or {})
+    laser = {"type": "laser_sheet", "id": "laser", "thickness": 4.0,
+             "origin": mi.ScalarPoint3f(*[float(v) for v in cam.position_mm - [0, 0, 500]])}
+    laser.update(sheet or {})
+    return load_dict({
+        "type": "scene", "integrator": integrator or {"type": "particle_tracer"}, "sensor": s, "laser": laser,
+        "particles": {"type": "ellipsoidsmesh", "filename": str(tmp_path / name), "extent": 1.0,
+                      "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}},
+                      "emitter": {"type": "tracer_particles", "sheet": {"type": "ref", "id": "laser"}}},
+    })
+
+
+def render(sc, spp=1, seed=0):
+    return np.array(mi.render(sc, spp=spp, seed=seed), dtype=np.float64)[..., 0]
+
+
+def window_stats(img, uv, half=4):
+    """Sum and centroid of the image in a window around each projected position."""
+    h, w = img.shape
+    yy, xx = np.mgrid[0:h, 0:w] + 0.5
+    out = []
+    for u, v in uv:
+        m = (np.abs(xx - u) <= half) & (np.abs(yy - v) <= half)
+        s = img[m].sum()
+        out.append((s, (img * xx)[m].sum() / s, (img * yy)[m].sum() / s))
+    return np.array(out)
