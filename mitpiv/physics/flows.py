@@ -183,7 +183,7 @@ class HillVortex(_Axisymmetric):
         r, z, e_r, _ = self._cyl(p, c)
         big_r2 = r * r + z * z
         inside = big_r2 <= a * a
-        f5 = (a * a / np.maximum(big_r2, 1e-300)) ** 2.5
+        f5 = (a * a / np.maximum(big_r2, a * a)) ** 2.5  # only used outside (R > a)
         uz = np.where(inside, 1.5 * u0 * (1 - (2 * r * r + z * z) / a**2), u0 * (f5 * (2 * z * z - r * r) / (2 * a * a) - 1))
         ur = np.where(inside, 1.5 * u0 * r * z / a**2, 1.5 * u0 * r * z / a**2 * f5)
         if self.frame == "lab":

@@ -15,10 +15,10 @@ class PropertyReader:
         self.owner = owner
 
     def has(self, name: str) -> bool:
-        return self.props.has_property(name)
+        return name in self.props
 
     def _get(self, name, default, kinds, what):
-        if not self.props.has_property(name):
+        if not name in self.props:
             return default
         value = self.props.get(name)
         if not isinstance(value, kinds) or isinstance(value, bool) and bool not in kinds:
@@ -44,7 +44,7 @@ class PropertyReader:
         return self._get(name, default, (str,), "a string")
 
     def vector(self, name: str, default=None):
-        if not self.props.has_property(name):
+        if not name in self.props:
             return default
         v = self.props.get(name)
         try:
@@ -54,7 +54,7 @@ class PropertyReader:
         return out
 
     def object(self, name: str, default=None):
-        return self.props.get(name) if self.props.has_property(name) else default
+        return self.props.get(name) if name in self.props else default
 
     def finish(self) -> None:
         """Raise :class:`ConfigError` for properties nobody read (typos, unsupported names)."""

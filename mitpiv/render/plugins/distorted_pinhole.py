@@ -134,7 +134,7 @@ class DistortedPinhole(mi.Sensor):
         if any(placement):
             if not all(placement):
                 raise ConfigError("distorted_pinhole: placement needs all of 'azimuth_deg', 'elevation_deg', 'distance_mm'.")
-            if props.has_property("to_world"):
+            if "to_world" in props:
                 raise ConfigError("distorted_pinhole: give 'to_world' or azimuth/elevation placement, not both.")
             rot, pos = place_camera(
                 target_mm=rd.vector("target", (0.0, 0.0, 0.0)),
