@@ -141,9 +141,8 @@ def load_scene(xml_path, *, frame: int = 0, params: dict | None = None):
             read_particles_ply(pf)
         except FileFormatError as e:
             raise ConfigError(f"frame {frame}: {e}") from None
-    kwargs = {k: v for k, v in values.items()}
     try:
-        scene = mi.load_file(str(xml_path), **kwargs)
+        scene = mi.load_file(str(xml_path), **values)
     except MitpivError:
         raise
     except Exception as e:  # Mitsuba wraps plugin errors in RuntimeError

@@ -18,7 +18,7 @@ class PropertyReader:
         return name in self.props
 
     def _get(self, name, default, kinds, what):
-        if not name in self.props:
+        if name not in self.props:
             return default
         value = self.props.get(name)
         if not isinstance(value, kinds) or isinstance(value, bool) and bool not in kinds:
@@ -44,7 +44,7 @@ class PropertyReader:
         return self._get(name, default, (str,), "a string")
 
     def vector(self, name: str, default=None):
-        if not name in self.props:
+        if name not in self.props:
             return default
         v = self.props.get(name)
         try:

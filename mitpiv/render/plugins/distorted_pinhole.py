@@ -98,7 +98,7 @@ import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
 from mitpiv.physics.camera import PinholeCamera, place_camera
-from mitpiv.physics.distortion import Distortion, distort, distort_jacobian, percent_to_k1, undistort
+from mitpiv.physics.distortion import Distortion, distort_jacobian, percent_to_k1, undistort
 from mitpiv.render.plugins._props import PropertyReader
 
 _VARIANT = mi.variant()
@@ -307,5 +307,4 @@ class DistortedPinhole(mi.Sensor):
         return d
 
 
-_ = distort  # the forward model is used through distort_jacobian; kept for readers
 mi.register_sensor("distorted_pinhole", lambda props: DistortedPinhole(props))

@@ -142,9 +142,6 @@ class TracerParticles(mi.Emitter):
         phase_val, _ = self.phase.eval_pdf(ctx, mei, w_out, active)
         return e * c_sca * phase_val[0]
 
-    def has_diameter_attribute(self, shape) -> bool:
-        return "diameter" in mi.traverse(shape).keys()
-
     def bind_shape(self, shape) -> None:
         """Attach the particle shape (Mitsuba does not expose a mesh emitter's shape to Python).
 
@@ -158,6 +155,7 @@ class TracerParticles(mi.Emitter):
                 f"divides by |d| instead of |d|^2 in scaled space.)"
             )
         self._shape = shape
+        self._has_diameter = "diameter" in mi.traverse(shape).keys()  # per-particle PLY column
         self._shell_cache = None
         self._shell()  # computed now: it reads arrays, which must not happen while tracing
 
@@ -179,7 +177,7 @@ class TracerParticles(mi.Emitter):
         idx = dr.arange(mi.UInt32, n) * 10
         center = mi.Point3f(dr.gather(mi.Float, data, idx), dr.gather(mi.Float, data, idx + 1), dr.gather(mi.Float, data, idx + 2))
         radius = dr.gather(mi.Float, data, idx + 3) * params["extent"]
-        if self.has_diameter_attribute(shape):
+        if self._has_diameter:
             diameter = mi.Float(params["diameter"])
         else:
             diameter = dr.full(mi.Float, self.default_diameter_um, n)
@@ -234,7 +232,7 @@ class TracerParticles(mi.Emitter):
         c = shape.eval_attribute_3("center", si, active)
         center = mi.Point3f(c[0], c[1], c[2])
         radius = shape.eval_attribute_3("scale", si, active)[0] * shape.eval_attribute_1("extent", si, active)
-        if self.has_diameter_attribute(shape):
+        if self._has_diameter:
             diameter = shape.eval_attribute_1("diameter", si, active)
         else:
             diameter = mi.Float(self.default_diameter_um)
