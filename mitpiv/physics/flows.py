@@ -296,10 +296,10 @@ class GridFlow(Flow):
                 f"GridFlow: {str(p)!r} must be an NPZ with arrays x, y, z, u, v, w ({e})."
             ) from None
         shape = tuple(len(a) for a in axes)
-        for name, c in zip("uvw", comps):
+        for name, c in zip("uvw", comps, strict=True):
             if c.shape != shape:
                 raise FileFormatError(f"GridFlow: array '{name}' has shape {c.shape}, expected {shape}.")
-        for name, a in zip("xyz", axes):
+        for name, a in zip("xyz", axes, strict=True):
             if a.size < 2 or np.any(np.diff(a) <= 0):
                 raise FileFormatError(f"GridFlow: axis '{name}' must be strictly increasing with >= 2 points.")
         self._interp = RegularGridInterpolator(

@@ -24,7 +24,7 @@ def test_concentration_and_uniformity():
     p = seed_box(LO, HI, concentration_per_mm3=10.0, seed=1)
     assert len(p) == 16000
     # chi-square of counts in 4 x 4 x 2 cells against uniform (df = 31; p = 1e-4 at 61)
-    h, _ = np.histogramdd(p.positions_mm, bins=(4, 4, 2), range=list(zip(LO, HI)))
+    h, _ = np.histogramdd(p.positions_mm, bins=(4, 4, 2), range=list(zip(LO, HI, strict=True)))
     expect = len(p) / h.size
     assert np.sum((h - expect) ** 2 / expect) < 61
 

@@ -222,7 +222,7 @@ class TracerParticles(mi.Emitter):
         """Projected area of the unit proxy shell seen from direction ``w`` (exact, convex shell)."""
         normals, weights, _ = self._shell()
         acc = mi.Float(0.0)
-        for nrm, wt in zip(normals, weights):
+        for nrm, wt in zip(normals, weights, strict=True):
             acc += wt * dr.abs(w.x * nrm[0] + w.y * nrm[1] + w.z * nrm[2])
         return acc
 
