@@ -54,6 +54,13 @@
      - unbounded
      - Optional full width of the sheet in the plane (top-hat edges, centred on
        ``origin``, measured along ``normal x direction``).
+   * - polarization
+     - vector
+     - --
+     - unpolarised
+     - Optional direction of the electric field of a linearly polarised laser; must be
+       perpendicular to ``direction`` (usually in the sheet plane, ``normal x direction``).
+       Only the ``mie`` phase function of ``tracer_particles`` uses it.
 
 Ordinary surfaces are lit through Mitsuba's ``direct`` / ``path`` integrators:
 ``sample_direction`` returns the delta direction ``-direction`` weighted by the local
@@ -104,6 +111,7 @@ class LaserSheet(mi.Emitter):
         self.wavelength_nm = check_positive("wavelength_nm", rd.float("wavelength_nm", 532.0), owner="laser_sheet", unit="nm")
         width = rd.float("width", None)
         self.width_mm = None if width is None else check_positive("width", width, owner="laser_sheet", unit="mm")
+        pol = rd.vector("polarization", None)
         rd.finish()
         if np.linalg.norm(direction) == 0:
             raise ConfigError("laser_sheet: parameter 'direction' must be a non-zero vector.")
@@ -113,6 +121,19 @@ class LaserSheet(mi.Emitter):
             raise ConfigError("laser_sheet: parameter 'normal' must not be parallel to 'direction'.")
         self.normal = normal / np.linalg.norm(normal)
         self.width_axis = np.cross(self.normal, self.direction)
+        self.polarization = None
+        if pol is not None:
+            pol = np.asarray(pol, float)
+            if not np.linalg.norm(pol) > 0:
+                raise ConfigError("laser_sheet: parameter 'polarization' must be a non-zero vector (or left out: unpolarised).")
+            pol = pol / np.linalg.norm(pol)
+            if abs(pol @ self.direction) > 1e-6:
+                raise ConfigError(
+                    f"laser_sheet: 'polarization' {pol.tolist()} is not perpendicular to 'direction' "
+                    f"{self.direction.tolist()} (light is transverse); e.g. use {self.width_axis.round(12).tolist()} "
+                    f"(in the sheet plane) or {self.normal.round(12).tolist()} (across it)."
+                )
+            self.polarization = pol
         self.m_flags = mi.EmitterFlags.DeltaDirection
 
     # ------------------------------------------------------------------ physics
@@ -184,7 +205,8 @@ class LaserSheet(mi.Emitter):
             f"LaserSheet[origin={self.origin.tolist()}, direction={self.direction.tolist()}, "
             f"normal={self.normal.tolist()}, thickness={self.thickness_mm} mm, "
             f"profile={self.profile}, irradiance={self.irradiance_peak} W/mm^2, "
-            f"wavelength={self.wavelength_nm} nm, width={self.width_mm}]"
+            f"wavelength={self.wavelength_nm} nm, width={self.width_mm}, "
+            f"polarization={None if self.polarization is None else self.polarization.tolist()}]"
         )
 
     def describe(self) -> dict:
@@ -200,6 +222,7 @@ class LaserSheet(mi.Emitter):
             "irradiance_w_mm2": self.irradiance_peak,
             "wavelength_nm": self.wavelength_nm,
             "width_mm": self.width_mm,
+            "polarization": None if self.polarization is None else self.polarization.tolist(),
         }
 
 

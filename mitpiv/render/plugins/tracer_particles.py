@@ -27,7 +27,8 @@
      - float
      - --
      - 2.0
-     - Q_sca: C_sca = Q_sca pi d^2 / 4 (2 is the large-particle limit).
+     - Q_sca: C_sca = Q_sca pi d^2 / 4 (2 is the large-particle limit). Not with the
+       ``mie`` phase, which computes C_sca.
    * - diameter_um
      - float
      - um
@@ -38,6 +39,10 @@
      - --
      - isotropic
      - Angular distribution of the scattered light (any Mitsuba phase function).
+       With ``mie`` the particle radiates ``I = E dC/dOmega(d, theta)`` from Mie theory
+       (per-particle diameters interpolated in a table, see ``mie``'s ``size_step``), and
+       a polarised laser sheet gives ``E [dC_par cos^2(phi) + dC_per sin^2(phi)]``, phi
+       the angle between the polarisation and the scattering plane.
 
 Each particle radiates the intensity ``I(w) = E_sheet(c) C_sca phase(theta)`` [W/sr], with
 ``c`` its centre, ``theta`` the angle between the laser direction and ``w``. The proxy
@@ -111,11 +116,23 @@ class TracerParticles(mi.Emitter):
             if np.linalg.norm(d) == 0:
                 raise ConfigError("tracer_particles: 'laser_direction' must be non-zero.")
             self._direction = d / np.linalg.norm(d)
-        self.q_sca = check_positive("scattering_efficiency", rd.float("scattering_efficiency", 2.0), owner="tracer_particles")
+        q_sca = rd.float("scattering_efficiency", None)
+        self.q_sca = check_positive("scattering_efficiency", 2.0 if q_sca is None else q_sca, owner="tracer_particles")
         self.default_diameter_um = check_positive("diameter_um", rd.float("diameter_um", 1.0), owner="tracer_particles", unit="um")
         rd.finish()
         if self.phase is None:
             self.phase = mi.load_dict({"type": "isotropic"})
+        self.is_mie = bool(getattr(self.phase, "is_mie", False))
+        if self.is_mie and q_sca is not None:
+            raise ConfigError("tracer_particles: 'scattering_efficiency' cannot be combined with the mie phase, "
+                              "which computes the scattering cross-section; remove it.")
+        self.polarization = None if self.sheet is None else self.sheet.polarization
+        if self.polarization is not None and not self.is_mie:
+            raise ConfigError(
+                "tracer_particles: the laser sheet is polarised ('polarization'), but only the mie phase "
+                "function has a polarised form; nest <phase type=\"mie\"> or remove the sheet's 'polarization'."
+            )
+        self._xs = None
         self.m_flags = mi.EmitterFlags.Surface
 
     # ------------------------------------------------------------------ physics
@@ -129,9 +146,52 @@ class TracerParticles(mi.Emitter):
             return self.sheet.irradiance(p)
         return mi.Float(self.uniform_irradiance)
 
+    def wavelength_nm(self):
+        return self.sheet.wavelength_nm if self.sheet is not None else None
+
+    def _bind_mie(self, diameters_um) -> None:
+        """Upload the Mie differential cross-section table (rows: diameters, columns: angles)."""
+        t = self.phase.cross_section_table(diameters_um, wavelength_nm=self.wavelength_nm())
+        rows, cols = t["par"].shape
+        self._xs = {
+            "theta": mi.Float(t["theta"].astype(np.float32)), "n": cols, "rows": rows,
+            "d0": t["d0_um"], "inv_dd": 0.0 if rows == 1 else 1.0 / t["dd_um"],
+            "par": mi.Float(t["par"].astype(np.float32).ravel()), "per": mi.Float(t["per"].astype(np.float32).ravel()),
+            "csca_mm2": t["csca_mm2"],
+        }
+
+    def _mie_intensity(self, e, diameter_um, w_out):
+        from mitpiv.render.plugins.mie_phase import interval, scattering_angle
+
+        xs = self._xs
+        k = mi.Vector3f(self.laser_direction())
+        i, t = interval(xs["theta"], xs["n"], scattering_angle(w_out, k))
+        if xs["rows"] == 1:
+            rows = [(mi.UInt32(0), mi.Float(1.0))]
+        else:
+            u = dr.clip((diameter_um - xs["d0"]) * xs["inv_dd"], 0.0, xs["rows"] - 1.000001)
+            j = mi.UInt32(dr.floor(u))
+            f = u - mi.Float(j)
+            rows = [(j, 1.0 - f), (j + 1, f)]
+        par, per = mi.Float(0.0), mi.Float(0.0)
+        for j, wj in rows:  # bilinear: two rows x two angles
+            base = j * xs["n"] + i
+            par += wj * dr.lerp(dr.gather(mi.Float, xs["par"], base), dr.gather(mi.Float, xs["par"], base + 1), t)
+            per += wj * dr.lerp(dr.gather(mi.Float, xs["per"], base), dr.gather(mi.Float, xs["per"], base + 1), t)
+        if self.polarization is None:
+            return e * 0.5 * (par + per)
+        # phi: angle between the polarisation and the scattering plane (k, w_out)
+        pol = mi.Vector3f(*self.polarization.tolist())
+        wk = dr.dot(w_out, k)
+        s2 = dr.maximum(1.0 - wk * wk, 0.0)
+        cos2 = dr.select(s2 > 1e-12, dr.square(dr.dot(w_out, pol)) / dr.maximum(s2, 1e-30), 0.5)
+        return e * (par * cos2 + per * (1.0 - cos2))
+
     def intensity(self, center, diameter_um, w_out, wavelengths, active=True):
         """Radiant intensity [W/sr] of particles at ``center`` toward unit directions ``w_out``."""
         e = self.irradiance_at(center)
+        if self.is_mie:
+            return self._mie_intensity(e, diameter_um, w_out)
         c_sca = self.q_sca * (math.pi / 4.0) * dr.square(diameter_um * 1e-3)  # mm^2
         mei = dr.zeros(mi.MediumInteraction3f)
         mei.p = center
@@ -158,6 +218,8 @@ class TracerParticles(mi.Emitter):
         self._has_diameter = "diameter" in mi.traverse(shape).keys()  # per-particle PLY column
         self._shell_cache = None
         self._shell()  # computed now: it reads arrays, which must not happen while tracing
+        if self.is_mie:
+            self._bind_mie(np.array(mi.traverse(shape)["diameter"], dtype=np.float64) if self._has_diameter else None)
 
     def get_particle_shape(self):
         shape = getattr(self, "_shape", None)
@@ -226,8 +288,17 @@ class TracerParticles(mi.Emitter):
             acc += wt * dr.abs(w.x * nrm[0] + w.y * nrm[1] + w.z * nrm[2])
         return acc
 
+    def ready(self) -> bool:
+        """Bound to its shape (and, with the mie phase, its cross-section table uploaded)."""
+        return getattr(self, "_shape", None) is not None and (not self.is_mie or self._xs is not None)
+
     def eval(self, si, active=True):
-        shape = self.get_particle_shape()
+        if not self.ready():
+            # Dr.Jit traces a virtual call for every live emitter instance, including one left
+            # over from a scene whose loading failed: such an instance must trace, and radiates
+            # nothing. Scenes loaded through load_scene / load_dict are always bound.
+            return mi.Spectrum(0.0)
+        shape = self._shape
         active = mi.Bool(active) & (mi.Frame3f.cos_theta(si.wi) > 0)
         c = shape.eval_attribute_3("center", si, active)
         center = mi.Point3f(c[0], c[1], c[2])
@@ -276,8 +347,9 @@ class TracerParticles(mi.Emitter):
     def describe(self) -> dict:
         return {
             "type": "tracer_particles",
-            "scattering_efficiency": self.q_sca,
-            "phase": self.phase.class_name() if hasattr(self.phase, "class_name") else str(self.phase),
+            "scattering_efficiency": "mie" if self.is_mie else self.q_sca,
+            "phase": self.phase.describe() if hasattr(self.phase, "describe") else self.phase.class_name(),
+            "mie_table_rows": None if self._xs is None else self._xs["rows"],
             "sheet": None if self.sheet is None else self.sheet.describe(),
             "uniform_irradiance_w_mm2": self.uniform_irradiance if self.sheet is None else None,
             "radiance_normalisation": "L = I / A_proj(w), exact projected area of the proxy shell",

@@ -1,0 +1,262 @@
+"""``mie``: Mie phase function of spheres, tabulated at construction.
+
+.. list-table::
+   :header-rows: 1
+
+   * - Parameter
+     - Type
+     - Unit
+     - Default
+     - Meaning
+   * - diameter_um
+     - float
+     - um
+     - (required outside ``tracer_particles``)
+     - Sphere diameter; with ``geometric_std`` the median of a log-normal distribution.
+   * - geometric_std
+     - float
+     - --
+     - monodisperse
+     - Geometric standard deviation (> 1) of a log-normal size distribution.
+   * - diameters_um, weights
+     - string
+     - um, --
+     - --
+     - A discrete size distribution: comma-separated diameters and number weights.
+   * - index
+     - float
+     - --
+     - 1.45
+     - Real part n of the particle index n + ik.
+   * - index_imag
+     - float
+     - --
+     - 0
+     - Absorption k >= 0 of the particle index n + ik.
+   * - medium_index
+     - float
+     - --
+     - 1.0
+     - Real index of the surrounding medium (1.333 for water).
+   * - wavelength_nm
+     - float
+     - nm
+     - 532, or the laser's
+     - Vacuum wavelength. Nested in ``tracer_particles`` it defaults to the laser
+       sheet's and must agree with it.
+   * - angles
+     - integer
+     - --
+     - 1024
+     - Table resolution (nodes in the scattering angle; half of them in the forward
+       peak for large particles, see :func:`mitpiv.physics.mie.angle_grid`).
+   * - size_step
+     - float
+     - --
+     - 0.02
+     - Nested in ``tracer_particles`` with per-particle diameters: spacing, in size
+       parameter x, of the diameters tabulated for the per-particle lookup (linear
+       interpolation between them).
+
+The table holds ``2 pi sin(theta) p(theta)`` on a grid in the scattering angle theta and
+is interpolated linearly in theta; ``eval``, ``pdf`` and ``sample`` (inverse CDF, exact
+for the interpolant) are therefore consistent. Angles are computed as
+``2 atan2(|wo + wi|, |wo - wi|)``, accurate in float32 down to the 1/x-wide forward
+peak of large spheres (cos(theta) would round to 1 there). Usable as the phase function of
+a Mitsuba medium (``volpath``) and nested in ``tracer_particles``, which then also takes the
+scattering cross-section and, for a polarised laser sheet, the polarised intensities from
+Mie theory.
+
+.. code-block:: xml
+
+    <phase type="mie">
+        <float name="diameter_um" value="1"/>
+        <float name="index" value="1.45"/>
+        <float name="medium_index" value="1.0"/>
+    </phase>
+"""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mitpiv.errors import ConfigError, check_positive
+from mitpiv.physics import mie
+from mitpiv.render.plugins._props import PropertyReader
+
+_VARIANT = mi.variant()
+
+
+def _floats(text: str, name: str) -> list[float]:
+    try:
+        return [float(t) for t in text.replace(",", " ").split()]
+    except ValueError:
+        raise ConfigError(f"mie: '{name}' must be a comma-separated list of numbers, got {text!r}.") from None
+
+
+def scattering_angle(w_a, w_b):
+    """Angle between unit vectors, accurate at 0 and pi in float32: 2 atan2(|a - b|, |a + b|)."""
+    return 2.0 * dr.atan2(dr.norm(w_a - w_b), dr.norm(w_a + w_b))
+
+
+def interval(nodes: mi.Float, n: int, theta):
+    """Index i with nodes[i] <= theta < nodes[i+1] and the fraction t in [0, 1]."""
+    i = mi.math.find_interval(n, lambda k: dr.gather(mi.Float, nodes, k) <= theta)
+    t0 = dr.gather(mi.Float, nodes, i)
+    t1 = dr.gather(mi.Float, nodes, i + 1)
+    return i, dr.clip((theta - t0) / (t1 - t0), 0.0, 1.0)
+
+
+class MiePhase(mi.PhaseFunction):
+    """Mie phase function; see the module docstring for parameters."""
+
+    is_mie = True  # tracer_particles asks for cross-sections and polarised tables
+
+    def __init__(self, props: mi.Properties):
+        super().__init__(props)
+        rd = PropertyReader(props, "mie")
+        d = rd.float("diameter_um", None)
+        gstd = rd.float("geometric_std", None)
+        dlist = rd.string("diameters_um", None)
+        wlist = rd.string("weights", None)
+        n = rd.float("index", 1.45)
+        k = rd.float("index_imag", 0.0)
+        self.medium_index = check_positive("medium_index", rd.float("medium_index", 1.0), owner="mie")
+        wl = rd.float("wavelength_nm", None)
+        self.wavelength_nm = None if wl is None else check_positive("wavelength_nm", wl, owner="mie", unit="nm")
+        self.angles = rd.int("angles", 1024)
+        self.size_step = check_positive("size_step", rd.float("size_step", 0.02), owner="mie")
+        rd.finish()
+        if k < 0:
+            raise ConfigError(f"mie: 'index_imag' must be >= 0 (the index is n + ik), got {k!r}.")
+        self.m_particle = complex(check_positive("index", n, owner="mie"), k)
+        if dlist is not None:
+            if d is not None or gstd is not None:
+                raise ConfigError("mie: give either 'diameters_um' (with 'weights') or 'diameter_um' (with 'geometric_std'), not both.")
+            ds = _floats(dlist, "diameters_um")
+            ws = None if wlist is None else _floats(wlist, "weights")
+            self.size = mie.SizeDistribution(ds, ws)
+        elif wlist is not None:
+            raise ConfigError("mie: 'weights' needs 'diameters_um'.")
+        elif gstd is not None:
+            if d is None:
+                raise ConfigError("mie: 'geometric_std' needs 'diameter_um' (the median).")
+            self.size = mie.lognormal(check_positive("diameter_um", d, owner="mie", unit="um"), gstd)
+        else:
+            self.size = None if d is None else check_positive("diameter_um", d, owner="mie", unit="um")
+        self._distr = None
+        if self.size is not None:
+            self._build(self.wavelength_nm or 532.0)
+        self.m_flags = mi.PhaseFunctionFlags.Anisotropic
+        self.m_components = [self.m_flags]
+
+    # ------------------------------------------------------------------ tables
+    def table(self, diameters_um=None, wavelength_nm=None) -> mie.PhaseTable:
+        """Phase table (NumPy) for this plugin's particle or for the given diameters."""
+        size = self.size if diameters_um is None else diameters_um
+        if size is None:
+            raise ConfigError("mie: no particle size: give 'diameter_um' (or a distribution), or nest it in "
+                              "tracer_particles with a particle file that has diameters.")
+        wl = wavelength_nm or self.wavelength_nm or 532.0
+        if self.wavelength_nm is not None and wavelength_nm is not None and abs(self.wavelength_nm - wavelength_nm) > 1e-9:
+            raise ConfigError(f"mie: 'wavelength_nm' = {self.wavelength_nm} differs from the laser's {wavelength_nm} nm; "
+                              f"leave it out to use the laser's.")
+        return mie.phase_table(size, self.m_particle, wavelength_nm=wl, n_medium=self.medium_index, angles=self.angles)
+
+    def cross_section_table(self, diameters_um=None, wavelength_nm=None) -> dict:
+        """Differential cross-sections [mm^2/sr] for ``tracer_particles`` (NumPy, float64).
+
+        ``diameters_um``: the per-particle diameters of a particle file, or None for this
+        plugin's own size. Rows are diameters equally spaced by ``size_step`` in x from the
+        smallest to the largest (one row when all are equal); columns the ascending
+        scattering angles ``theta`` [rad]. Returns ``theta``, ``d0_um``, ``dd_um`` (row
+        spacing, 0 for one row), ``par`` and ``per`` (rows x angles), ``csca_mm2`` (rows).
+        """
+        if diameters_um is not None and self.size is not None:
+            raise ConfigError(
+                "mie: the particle file gives per-particle diameters; remove 'diameter_um' / the size "
+                "distribution from the nested mie phase (they are for media and files without diameters)."
+            )
+        if diameters_um is None:
+            t, d0, dd = self.table(wavelength_nm=wavelength_nm), 0.0, 0.0
+        else:
+            d = np.asarray(diameters_um, dtype=np.float64)
+            lo, hi = float(d.min()), float(d.max())
+            wl = wavelength_nm or self.wavelength_nm or 532.0
+            step_um = self.size_step * wl * 1e-3 / (math.pi * self.medium_index)
+            rows = 1 if hi - lo <= 1e-9 * hi else int(math.ceil((hi - lo) / step_um)) + 1
+            grid = np.linspace(lo, hi, rows) if rows > 1 else np.array([lo])
+            t = self.table(grid, wavelength_nm=wavelength_nm)
+            d0, dd = lo, (grid[1] - grid[0]) if rows > 1 else 0.0
+        c = t.csca_mm2[:, None]
+        return {"theta": t.theta[::-1].copy(), "d0_um": d0, "dd_um": dd, "csca_mm2": t.csca_mm2.copy(),
+                "par": (c * t.p_par)[:, ::-1].copy(), "per": (c * t.p_per)[:, ::-1].copy()}
+
+    def _build(self, wavelength_nm):
+        t = self.table(wavelength_nm=wavelength_nm)
+        theta = t.theta[::-1].copy()  # ascending angle
+        g = 2 * math.pi * np.sin(theta) * t.phase[0][::-1]
+        g[0] = g[-1] = 0.0
+        g /= np.sum(0.5 * (g[1:] + g[:-1]) * np.diff(theta))  # the interpolant integrates to 1
+        self._theta_np, self._g_np = theta, g
+        self._n = theta.size
+        self._theta = mi.Float(theta.astype(np.float32))
+        self._g = mi.Float(g.astype(np.float32))
+        self._distr = mi.IrregularContinuousDistribution(self._theta, self._g)
+        self._table = t
+
+    def _require(self):
+        if self._distr is None:
+            raise ConfigError("mie: no particle size: give 'diameter_um' (or a distribution) to use it outside tracer_particles.")
+
+    def pdf_theta(self, theta):
+        """Phase function [1/sr] at scattering angles ``theta`` [rad] (the table's interpolant)."""
+        self._require()
+        i, t = interval(self._theta, self._n, theta)
+        g0 = dr.gather(mi.Float, self._g, i)
+        g1 = dr.gather(mi.Float, self._g, i + 1)
+        th0 = dr.gather(mi.Float, self._theta, i)
+        th1 = dr.gather(mi.Float, self._theta, i + 1)
+        g = dr.lerp(g0, g1, t)
+        s = dr.sin(theta)
+        # End intervals: g vanishes at 0 and pi like sin(theta); divide the slope instead.
+        first = i == 0
+        last = i == self._n - 2
+        x = dr.select(first, theta, dr.pi - theta)
+        x_over_sin = dr.select(x > 1e-4, x / dr.maximum(s, 1e-30), 1.0)
+        end = dr.select(first, g1 / (th1 - th0), g0 / (th1 - th0)) * x_over_sin
+        val = dr.select(first | last, end, g / dr.maximum(s, 1e-30))
+        return val * (0.5 / math.pi)
+
+    # ------------------------------------------------------------------ PhaseFunction interface
+    def sample(self, ctx, mei, sample1, sample2, active=True):
+        self._require()
+        theta = self._distr.sample(sample2.x, active)
+        sin_t, cos_t = dr.sincos(theta)
+        sin_p, cos_p = dr.sincos(2.0 * dr.pi * sample2.y)
+        wo = -mei.to_world(mi.Vector3f(sin_t * cos_p, sin_t * sin_p, cos_t))
+        pdf = self.pdf_theta(theta)
+        return wo, mi.Spectrum(1.0), pdf
+
+    def eval_pdf(self, ctx, mei, wo, active=True):
+        theta = scattering_angle(wo, -mei.wi)
+        pdf = self.pdf_theta(theta)
+        return mi.Spectrum(pdf), pdf
+
+    def to_string(self):
+        return (f"MiePhase[size={self.size!r}, m={self.m_particle}, medium={self.medium_index}, "
+                f"wavelength={self.wavelength_nm}, angles={self.angles}]")
+
+    def describe(self) -> dict:
+        size = self.size
+        if isinstance(size, mie.SizeDistribution):
+            size = {"diameters_um": size.diameters_um.tolist(), "weights": size.weights.tolist()}
+        return {"type": "mie", "size_um": size, "index": [self.m_particle.real, self.m_particle.imag],
+                "medium_index": self.medium_index, "wavelength_nm": self.wavelength_nm, "angles": self.angles}
+
+
+mi.register_phase("mie", lambda props: MiePhase(props))

@@ -1,0 +1,249 @@
+"""Mie scattering (mitpiv.physics.mie) against an independent library and closed forms.
+
+References:
+* scattnlay 2.4 (Pena & Pal 2009), an independent implementation (n + ik, Bohren & Huffman
+  amplitudes, as ours). It loses Qext and S2 at x <~ 1e-3 to cancellation (measured: 60 %
+  off at x = 1e-4 against the Rayleigh closed form), so it is used for x >= 1e-2 only.
+* Closed forms: Rayleigh (small x), anomalous diffraction (van de Hulst, |m - 1| << 1,
+  x >> 1), Rayleigh-Gans-Debye angular shape (|m - 1| << 1, 2x|m - 1| << 1).
+* Conservation: the optical theorem, Qabs >= 0 (= 0 without absorption), the phase
+  function integrating to 1 (Gauss-Legendre on panels 1/x wide), |g| <= 1.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from mitpiv.errors import ConfigError
+from mitpiv.physics import mie
+
+# the issue's hard cases: water/DEHS/polystyrene/TiO2-like, bubble, near-1, absorbing, metal-like
+INDICES = [1.33, 1.45, 1.59, 2.5, 0.75, 1.0001, 1.5 + 0.01j, 1.5 + 1j, 0.2 + 3j]
+LAMBDA = 500.0
+
+
+def diam(x, n_medium=1.0):
+    """Diameter [um] for a size parameter at LAMBDA."""
+    return x * LAMBDA / (math.pi * n_medium) * 1e-3
+
+
+def scattnlay_ref(x, m, theta):
+    from scattnlay import scattnlay
+
+    _, qext, qsca, qabs, qback, _, g, _, s1, s2 = scattnlay(np.array([x]), np.array([complex(m)]), theta)
+    return qext, qsca, qback, g, s1, s2
+
+
+@pytest.mark.parametrize("m", INDICES, ids=str)
+@pytest.mark.parametrize("x", [0.01, 0.3, 1.0, 10.0, 100.0, 1000.0])
+def test_against_scattnlay(m, x):
+    theta_deg = np.array([0.0, 10.0, 45.0, 90.0, 135.0, 170.0, 180.0])
+    e = mie.efficiencies(diam(x), m, wavelength_nm=LAMBDA)
+    s1, s2 = mie.amplitudes(diam(x), m, theta_deg, wavelength_nm=LAMBDA)
+    qext, qsca, qback, g, r1, r2 = scattnlay_ref(x, m, np.radians(theta_deg))
+    assert e.x == pytest.approx(x, rel=1e-12)
+    # efficiencies: both series converge to ~1e-12; Qback and S carry Wiscombe's term-count error (~1e-6)
+    assert e.qext == pytest.approx(qext, rel=1e-8, abs=1e-14)
+    assert e.qsca == pytest.approx(qsca, rel=1e-8, abs=1e-14)
+    assert e.g == pytest.approx(g, abs=1e-8)
+    assert e.qback == pytest.approx(qback, rel=1e-5, abs=1e-14)
+    scale = abs(r1[0])
+    np.testing.assert_allclose(s1, r1, rtol=0, atol=2e-5 * scale)
+    np.testing.assert_allclose(s2, r2, rtol=0, atol=2e-5 * scale)
+
+
+def test_against_scattnlay_at_x_1e4():
+    x, m = 1e4, 1.45 + 0.01j
+    e = mie.efficiencies(diam(x), m, wavelength_nm=LAMBDA)
+    qext, qsca, qback, g, r1, _ = scattnlay_ref(x, m, np.radians([0.0, 1.0, 90.0, 180.0]))
+    s1, _ = mie.amplitudes(diam(x), m, [0.0, 1.0, 90.0, 180.0], wavelength_nm=LAMBDA)
+    assert (e.qext, e.qsca, e.g) == pytest.approx((qext, qsca, g), rel=1e-8)
+    assert e.qback == pytest.approx(qback, rel=1e-5)
+    np.testing.assert_allclose(s1, r1, atol=1e-5 * abs(r1[0]))
+
+
+@pytest.mark.parametrize("m", INDICES, ids=str)
+@pytest.mark.parametrize("x", [1e-4, 1e-3])
+def test_rayleigh_limit(m, x):
+    """Qsca = 8/3 x^4 |K|^2, Qabs = 4 x Im K, Qback = 4 x^4 |K|^2 and p = 3/(16 pi)(1 + cos^2),
+    K = (m^2 - 1)/(m^2 + 2); next terms are O(x^2) relative (1e-6 at x = 1e-3)."""
+    K = (m**2 - 1) / (m**2 + 2)
+    e = mie.efficiencies(diam(x), m, wavelength_nm=LAMBDA)
+    tol = 10 * x**2 * max(1.0, abs(m) ** 2)
+    assert e.qsca == pytest.approx(8 / 3 * x**4 * abs(K) ** 2, rel=tol)
+    assert e.qback == pytest.approx(4 * x**4 * abs(K) ** 2, rel=tol)
+    if complex(m).imag > 0:
+        assert e.qabs == pytest.approx(4 * x * K.imag, rel=tol)
+    th = np.linspace(0, 180, 13)
+    mu = np.cos(np.radians(th))
+    np.testing.assert_allclose(mie.phase_function(diam(x), m, th, wavelength_nm=LAMBDA), 3 / (16 * np.pi) * (1 + mu**2), rtol=tol)
+    par, per = mie.polarized_intensities(diam(x), m, th, wavelength_nm=LAMBDA)
+    np.testing.assert_allclose(per, 3 / (8 * np.pi), rtol=tol)
+    np.testing.assert_allclose(par, 3 / (8 * np.pi) * mu**2, rtol=tol, atol=tol * 3 / (8 * np.pi))
+
+
+@pytest.mark.parametrize("m", [1.33, 1.59, 2.5, 0.75, 1.5 + 0.01j, 1.5 + 1j, 0.2 + 3j], ids=str)
+def test_large_particle_extinction_paradox(m):
+    """Qext -> 2 (diffraction + geometric shadow); the approach is ~x^(-2/3)."""
+    e = mie.efficiencies(diam(1e4), m, wavelength_nm=LAMBDA)
+    assert abs(e.qext - 2) < 0.02
+
+
+@pytest.mark.parametrize("m, x", [(1.0001, 1e4), (1.001, 1000.0), (1.0003, 5000.0)])
+def test_anomalous_diffraction_near_one(m, x):
+    """van de Hulst: Qext = 2 - 4 sin(rho)/rho + 4 (1 - cos rho)/rho^2, rho = 2x(m-1),
+    for |m - 1| << 1 and x >> 1; its error is O(|m-1|) + O(1/x)."""
+    rho = 2 * x * (m - 1)
+    adt = 2 - 4 / rho * math.sin(rho) + 4 / rho**2 * (1 - math.cos(rho))
+    assert mie.efficiencies(diam(x), m, wavelength_nm=LAMBDA).qext == pytest.approx(adt, rel=5e-3)
+
+
+@pytest.mark.parametrize("x", [0.5, 3.0, 8.0])
+def test_rayleigh_gans_shape_near_one(x):
+    """m = 1.0001: p(theta) ~ (1 + cos^2) G(u)^2, G = 3 (sin u - u cos u)/u^3, u = 2x sin(theta/2);
+    relative error O(2x|m-1|) <= 2e-3."""
+    m = 1.0001
+    th = np.linspace(0.0, 180.0, 181)
+    u = 2 * x * np.sin(np.radians(th) / 2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        G = np.where(u > 1e-3, 3 * (np.sin(u) - u * np.cos(u)) / u**3, 1 - u**2 / 10)
+    ref = (1 + np.cos(np.radians(th)) ** 2) * G**2
+    ours = mie.phase_function(diam(x), m, th, wavelength_nm=LAMBDA)
+    ratio = ours / ours[0] / (ref / ref[0])
+    keep = ref / ref[0] > 1e-3  # away from the zeros of G
+    np.testing.assert_allclose(ratio[keep], 1.0, rtol=5e-3)
+
+
+def _sphere_integral(x, m, panel_width=1.0, nodes=6):
+    """Integral of the phase function over the sphere: Gauss-Legendre on panels narrower than
+    the ripples (period ~ pi / x)."""
+    npan = max(16, int(math.ceil(math.pi / (panel_width / max(x, 1.0)))))
+    g, w = np.polynomial.legendre.leggauss(nodes)
+    edges = np.linspace(0, math.pi, npan + 1)
+    half = (edges[1:] - edges[:-1])[:, None] / 2
+    th = ((edges[:-1, None] + edges[1:, None]) / 2 + half * g).ravel()
+    ww = (half * w).ravel()
+    p = mie.phase_function(diam(x), m, np.degrees(th), wavelength_nm=LAMBDA)
+    return 2 * math.pi * np.sum(p * np.sin(th) * ww)
+
+
+@pytest.mark.parametrize("m", INDICES, ids=str)
+@pytest.mark.parametrize("x", [1e-4, 0.5, 5.0, 50.0, 500.0])
+def test_phase_function_is_normalised(m, x):
+    assert _sphere_integral(x, m) == pytest.approx(1.0, abs=1e-6)
+
+
+def test_phase_function_is_normalised_at_x_1e4():
+    assert _sphere_integral(1e4, 1.33, panel_width=2.0, nodes=4) == pytest.approx(1.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("m", INDICES, ids=str)
+@pytest.mark.parametrize("x", [1e-4, 0.07, 0.1, 1.0, 10.0, 100.0, 1000.0, 1e4])
+def test_conservation_and_exact_angles(m, x):
+    """Optical theorem, Qabs >= 0, |g| <= 1, finite at exactly 0 and 180 deg, S1 = S2 at 0,
+    S1 = -S2 at 180 (B&H), Qback = 4 |S(180)|^2 / x^2."""
+    e = mie.efficiencies(diam(x), m, wavelength_nm=LAMBDA)
+    s1, s2 = mie.amplitudes(diam(x), m, [0.0, 180.0], wavelength_nm=LAMBDA)
+    vals = [e.qext, e.qsca, e.qabs, e.qback, e.g, *s1, *s2]
+    assert np.all(np.isfinite(vals))
+    assert e.qext == pytest.approx(4 / x**2 * s1[0].real, rel=1e-9)
+    assert e.qback == pytest.approx(4 / x**2 * abs(s1[1]) ** 2, rel=1e-5)
+    assert s1[0] == pytest.approx(s2[0], rel=1e-12)
+    assert s1[1] == pytest.approx(-s2[1], rel=1e-12)
+    assert e.qsca > 0 and e.qabs >= 0 and -1 <= e.g <= 1
+    if complex(m).imag == 0:
+        assert e.qabs == 0.0
+    else:
+        assert e.qext == pytest.approx(e.qsca + e.qabs, rel=1e-12)
+    assert e.csca_mm2 == pytest.approx(e.qsca * math.pi / 4 * (diam(x) * 1e-3) ** 2, rel=1e-12)
+
+
+def test_medium_and_wavelength_enter_through_x_and_m():
+    """A polyamide particle (1.5) in water (1.333) is the relative index 1.125 at x = pi d n / lambda."""
+    a = mie.efficiencies(2.0, 1.5, wavelength_nm=532, n_medium=1.333)
+    b = mie.efficiencies(2.0 * 1.333, 1.5 / 1.333, wavelength_nm=532)
+    assert a.x == pytest.approx(math.pi * 2000 * 1.333 / 532)
+    assert (a.qext, a.qsca, a.g) == pytest.approx((b.qext, b.qsca, b.g), rel=1e-12)
+
+
+def test_pivot_values_for_dehs():
+    """1 um DEHS (1.45) in air at 532 nm, values from miepython's documentation-level facts in
+    shared/REFERENCE.md: Qsca 3.52, g 0.71, p(0)/p(180) ~ 96, p(0)/p(90) ~ 150."""
+    e = mie.efficiencies(1.0, 1.45, wavelength_nm=532)
+    p = mie.phase_function(1.0, 1.45, [0.0, 90.0, 180.0], wavelength_nm=532)
+    assert e.qsca == pytest.approx(3.52, abs=0.01) and e.g == pytest.approx(0.71, abs=0.01)
+    assert p[0] / p[2] == pytest.approx(96, rel=0.03) and p[0] / p[1] == pytest.approx(150, rel=0.03)
+
+
+def test_size_distribution_averages():
+    dist = mie.lognormal(1.0, 1.3)
+    s = math.log(1.3)
+    # quadrature reproduces the log-normal moments
+    assert np.sum(dist.weights * dist.diameters_um**2) == pytest.approx(math.exp(2 * s * s), rel=1e-6)
+    e = mie.efficiencies(dist, 1.45, wavelength_nm=532)
+    each = mie.efficiencies(dist.diameters_um, 1.45, wavelength_nm=532)
+    assert e.csca_mm2 == pytest.approx(np.sum(dist.weights * each.csca_mm2), rel=1e-12)
+    assert e.g == pytest.approx(np.sum(dist.weights * each.csca_mm2 * each.g) / e.csca_mm2, rel=1e-12)
+    th = np.array([0.0, 30.0, 90.0, 150.0, 180.0])
+    p = mie.phase_function(dist, 1.45, th, wavelength_nm=532)
+    ref = sum(w * c * mie.phase_function(d, 1.45, th, wavelength_nm=532)
+              for d, w, c in zip(dist.diameters_um, dist.weights, each.csca_mm2, strict=True)) / e.csca_mm2
+    np.testing.assert_allclose(p, ref, rtol=1e-10)
+    # averaging washes out the ripple: polydisperse back-scatter is smoother than any single size
+    assert _sphere_integral_dist(dist) == pytest.approx(1.0, abs=1e-6)
+    narrow = mie.SizeDistribution([1.0, 1.0], [0.3, 0.7])
+    np.testing.assert_allclose(mie.phase_function(narrow, 1.45, th, wavelength_nm=532),
+                               mie.phase_function(1.0, 1.45, th, wavelength_nm=532), rtol=1e-12)
+
+
+def _sphere_integral_dist(dist):
+    g, w = np.polynomial.legendre.leggauss(6)
+    edges = np.linspace(0, math.pi, 201)
+    half = (edges[1:] - edges[:-1])[:, None] / 2
+    th = ((edges[:-1, None] + edges[1:, None]) / 2 + half * g).ravel()
+    p = mie.phase_function(dist, 1.45, np.degrees(th), wavelength_nm=532)
+    return 2 * math.pi * np.sum(p * np.sin(th) * (half * w).ravel())
+
+
+@pytest.mark.parametrize("x", [5.0, 200.0, 5000.0])
+def test_phase_table_interpolation_and_cache(x):
+    """The piecewise-linear table integrates to 1 exactly, converges to the exact phase
+    function as the resolution grows, and is cached by its parameters."""
+    d = diam(x)
+    rng = np.random.default_rng(2)
+    th = np.degrees(np.concatenate([rng.uniform(0, 3 / x, 200), rng.uniform(0, math.pi, 200)]))
+    exact = mie.phase_function(d, 1.45, th, wavelength_nm=LAMBDA)
+    errs = []
+    for n in (256, 1024, 4096):
+        t = mie.phase_table(d, 1.45, wavelength_nm=LAMBDA, angles=n)
+        assert mie._trapz_mu(t.phase, t.mu)[0] == pytest.approx(1.0, abs=1e-12)
+        assert t.theta[-1] == 0.0 and t.theta[0] == pytest.approx(math.pi) and np.all(np.diff(t.mu) > 0)
+        interp = np.interp(np.cos(np.radians(th)), t.mu, t.phase[0])
+        errs.append(np.sum(np.abs(interp - exact)) / np.sum(exact))
+        assert mie.phase_table(d, 1.45, wavelength_nm=LAMBDA, angles=n) is t
+    assert errs[2] < errs[0] and errs[2] < 0.01, errs
+
+
+@pytest.mark.parametrize(
+    "call, match",
+    [
+        (lambda: mie.efficiencies(1.0, 1.5 - 0.01j), r"negative imaginary part.*n \+ ik"),
+        (lambda: mie.efficiencies(1.0, 1.0000001), "within 1e-06 of 1"),
+        (lambda: mie.efficiencies(1.0, 1.333, n_medium=1.333), "within 1e-06 of 1"),
+        (lambda: mie.efficiencies(5000.0, 1.45), "size parameter.*outside the validated range"),
+        (lambda: mie.efficiencies(-1.0, 1.45), "'diameter_um' must be positive"),
+        (lambda: mie.efficiencies(1.0, 1.45, wavelength_nm=0.0), "'wavelength_nm' must be positive"),
+        (lambda: mie.efficiencies(1.0, 1.45, n_medium=-1.0), "'n_medium' must be a positive real"),
+        (lambda: mie.phase_function(1.0, 1.45, [190.0]), r"'theta_deg' must lie in \[0, 180\]"),
+        (lambda: mie.phase_function(1.0, 1.45, [10.0], polarization="s"), "'polarization'"),
+        (lambda: mie.lognormal(1.0, 0.5), "'geometric_std' must be > 1"),
+        (lambda: mie.SizeDistribution([1.0, 2.0], [1.0]), "'weights'"),
+        (lambda: mie.phase_table(1.0, 1.45, angles=4), "'angles' must be an integer >= 16"),
+    ],
+    ids=["k_negative", "index_near_one", "matched_medium", "x_too_large", "negative_diameter", "zero_wavelength",
+         "negative_medium", "angle_range", "polarization_name", "lognormal_std", "weights_shape", "table_resolution"],
+)
+def test_bad_input(call, match):
+    with pytest.raises(ConfigError, match=match):
+        call()
