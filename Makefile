@@ -20,6 +20,7 @@ lint: setup
 
 bench: setup
 	$(PY) bench/bench_cameras.py
+	$(PY) bench/bench_mie.py
 
 clean:
 	rm -rf out .pytest_cache

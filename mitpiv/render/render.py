@@ -121,6 +121,8 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
     done = 0
     for f, sc in scenes.items():
         laser = [e.describe() for e in sc.emitters() if hasattr(e, "irradiance_numpy")]
+        particles = [sh.emitter().describe() for sh in sc.shapes()
+                     if sh.emitter() is not None and hasattr(sh.emitter(), "particle_arrays")]
         for i, sensor in enumerate(sc.sensors()):
             sid = sensor.id() or f"sensor{i}"
             t0 = time.perf_counter()
@@ -144,6 +146,7 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
                 "sensor_id": sid,
                 "camera": sensor_model(sensor),
                 "illumination": laser,
+                "particles": particles,
                 "frame": f,
                 "time_s": None if times is None or f >= len(times) else float(times[f]),
                 "units": {"length": "mm", "pixel_value": PIXEL_UNITS},

@@ -85,6 +85,7 @@ def test_render_scene_files_and_metadata(xml, tmp_path):
         assert cam["distortion"]["k1"] < 0  # 0.5 % barrel
         assert cam["focal_length_mm"] == 85.0 and cam["pixel_pitch_um"] == 20.0
         assert meta["illumination"][0]["thickness_mm"] == 3.0
+        assert meta["particles"][0]["type"] == "tracer_particles"
     # frame 1 is frame 0 moved: the images differ
     assert not np.array_equal(read_exr(files[0])[0], read_exr(files[1])[0])
 
