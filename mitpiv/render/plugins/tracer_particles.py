@@ -169,8 +169,8 @@ class TracerParticles(mi.Emitter):
         if xs["rows"] == 1:
             rows = [(mi.UInt32(0), mi.Float(1.0))]
         else:
-            u = dr.clip((diameter_um - xs["d0"]) * xs["inv_dd"], 0.0, xs["rows"] - 1.000001)
-            j = mi.UInt32(dr.floor(u))
+            u = dr.clip((diameter_um - xs["d0"]) * xs["inv_dd"], 0.0, xs["rows"] - 1.0)
+            j = mi.UInt32(dr.minimum(dr.floor(u), xs["rows"] - 2.0))  # rows j, j+1 stay in the table
             f = u - mi.Float(j)
             rows = [(j, 1.0 - f), (j + 1, f)]
         par, per = mi.Float(0.0), mi.Float(0.0)
