@@ -104,11 +104,11 @@ def scattering_angle(w_a, w_b):
 
 
 def interval(nodes: mi.Float, n: int, theta):
-    """Index i with nodes[i] <= theta < nodes[i+1] and the fraction t in [0, 1]."""
+    """Index i with nodes[i] <= theta < nodes[i+1], the fraction t in [0, 1] and the width."""
     i = mi.math.find_interval(n, lambda k: dr.gather(mi.Float, nodes, k) <= theta)
     t0 = dr.gather(mi.Float, nodes, i)
-    t1 = dr.gather(mi.Float, nodes, i + 1)
-    return i, dr.clip((theta - t0) / (t1 - t0), 0.0, 1.0)
+    width = dr.gather(mi.Float, nodes, i + 1) - t0
+    return i, dr.clip((theta - t0) / width, 0.0, 1.0), width
 
 
 class MiePhase(mi.PhaseFunction):
@@ -216,11 +216,9 @@ class MiePhase(mi.PhaseFunction):
     def pdf_theta(self, theta):
         """Phase function [1/sr] at scattering angles ``theta`` [rad] (the table's interpolant)."""
         self._require()
-        i, t = interval(self._theta, self._n, theta)
+        i, t, width = interval(self._theta, self._n, theta)
         g0 = dr.gather(mi.Float, self._g, i)
         g1 = dr.gather(mi.Float, self._g, i + 1)
-        th0 = dr.gather(mi.Float, self._theta, i)
-        th1 = dr.gather(mi.Float, self._theta, i + 1)
         g = dr.lerp(g0, g1, t)
         s = dr.sin(theta)
         # End intervals: g vanishes at 0 and pi like sin(theta); divide the slope instead.
@@ -228,7 +226,7 @@ class MiePhase(mi.PhaseFunction):
         last = i == self._n - 2
         x = dr.select(first, theta, dr.pi - theta)
         x_over_sin = dr.select(x > 1e-4, x / dr.maximum(s, 1e-30), 1.0)
-        end = dr.select(first, g1 / (th1 - th0), g0 / (th1 - th0)) * x_over_sin
+        end = dr.select(first, g1, g0) / width * x_over_sin
         val = dr.select(first | last, end, g / dr.maximum(s, 1e-30))
         return val * (0.5 / math.pi)
 

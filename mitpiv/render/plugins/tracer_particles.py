@@ -157,7 +157,6 @@ class TracerParticles(mi.Emitter):
             "theta": mi.Float(t["theta"].astype(np.float32)), "n": cols, "rows": rows,
             "d0": t["d0_um"], "inv_dd": 0.0 if rows == 1 else 1.0 / t["dd_um"],
             "par": mi.Float(t["par"].astype(np.float32).ravel()), "per": mi.Float(t["per"].astype(np.float32).ravel()),
-            "csca_mm2": t["csca_mm2"],
         }
 
     def _mie_intensity(self, e, diameter_um, w_out):
@@ -165,7 +164,7 @@ class TracerParticles(mi.Emitter):
 
         xs = self._xs
         k = mi.Vector3f(self.laser_direction())
-        i, t = interval(xs["theta"], xs["n"], scattering_angle(w_out, k))
+        i, t, _ = interval(xs["theta"], xs["n"], scattering_angle(w_out, k))
         if xs["rows"] == 1:
             rows = [(mi.UInt32(0), mi.Float(1.0))]
         else:
