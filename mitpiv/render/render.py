@@ -18,7 +18,7 @@ from mitpiv.io.atomic import atomic_path
 from mitpiv.io.exr import write_exr
 from mitpiv.render.scene import load_scene
 
-__all__ = ["render_scene", "sensor_model", "write_preview", "PIXEL_UNITS"]
+__all__ = ["render_scene", "render_sensor", "sensor_model", "write_preview", "PIXEL_UNITS"]
 
 PIXEL_UNITS = (
     "radiance [W sr^-1 mm^-2] averaged over the pixel footprint and the aperture "
@@ -37,6 +37,35 @@ def sensor_model(sensor) -> dict:
         "resolution": list(sensor.film().size()),
         "parameters": {k: str(params[k]) for k in params.keys()},
     }
+
+
+def render_sensor(scene, sensor, *, spp: int = 0, seed: int = 0) -> np.ndarray:
+    """Render one sensor to a float32 (H, W) array, with the sensor's PSF if it asks for one.
+
+    A ``distorted_pinhole`` with ``psf="fft"`` is rendered on a film ``oversample`` times
+    finer (the film is restored afterwards) and convolved with its PSF
+    (:meth:`mitpiv.imaging.RenderPSF.apply`); ``psf="jitter"`` happens inside the sensor.
+    """
+    psf = getattr(sensor, "psf", None)
+    if psf is not None and psf.mode == "fft":
+        film = sensor.film()
+        params = mi.traverse(film)
+        size = mi.ScalarVector2u(film.size())
+        params["size"] = mi.ScalarVector2u(size[0] * psf.oversample, size[1] * psf.oversample)
+        params.update()
+        try:
+            img = mi.render(scene, sensor=sensor, spp=spp, seed=seed)
+            dr.eval(img)
+            fine = np.array(img, dtype=np.float64)
+        finally:
+            params["size"] = size
+            params.update()
+        arr = psf.apply(fine[:, :, 0] if fine.ndim == 3 else fine)
+        return arr.astype(np.float32)
+    img = mi.render(scene, sensor=sensor, spp=spp, seed=seed)
+    dr.eval(img)
+    arr = np.array(img, dtype=np.float32)
+    return arr[:, :, 0] if arr.ndim == 3 else arr
 
 
 def _integrator_info(scene) -> dict:
@@ -126,11 +155,7 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
         for i, sensor in enumerate(sc.sensors()):
             sid = sensor.id() or f"sensor{i}"
             t0 = time.perf_counter()
-            img = mi.render(sc, sensor=sensor, spp=spp or 0, seed=seed)
-            dr.eval(img)
-            arr = np.array(img, dtype=np.float32)
-            if arr.ndim == 3:
-                arr = arr[:, :, 0]
+            arr = render_sensor(sc, sensor, spp=spp or 0, seed=seed)
             dt = time.perf_counter() - t0
             meta = {
                 "mitpiv_version": mitpiv.__version__,

@@ -65,6 +65,39 @@
      - mm
      - 0.01, 1e7
      - Clip distances along the optical axis.
+   * - psf
+     - string
+     - --
+     - none
+     - Diffraction/aberration PSF: ``none``, ``fft`` (space invariant: oversampled render,
+       FFT convolution by :func:`mitpiv.render.render.render_sensor`; film filter
+       ``catmullrom`` (best), ``lanczos`` or ``tent``) or
+       ``jitter`` (ray offsets drawn from the PSF, may vary over the field; film filter
+       ``box``). See :class:`mitpiv.imaging.RenderPSF`.
+   * - psf_f_number, psf_wavelength_nm, psf_magnification
+     - float
+     - --, nm, --
+     - f_number, 532, thin-lens M
+     - Diffraction f-number (default: the thin lens'), wavelength, and the magnification
+       for the working f-number ``N (1 + |M|)`` (default ``f / (focus - f)`` for a thin
+       lens, none for a pinhole).
+   * - psf_zernike, psf_defocus_waves, psf_spherical_waves
+     - string, float
+     - waves RMS
+     - none
+     - Wavefront: ``"noll:waves, ..."`` (e.g. ``"11:0.05, 8:0.02"``), plus shorthands for
+       Noll 4 and 11.
+   * - psf_defocus_corner_waves
+     - float
+     - waves RMS
+     - 0
+     - ``jitter`` only: field curvature, defocus growing as ``(h / h_corner)^2``.
+   * - psf_energy_tolerance, psf_oversample, psf_table_oversample, psf_field_levels
+     - float, int
+     - --
+     - 1e-3, 5, 8, 16
+     - Accuracy knobs: PSF window truncation; FFT render oversampling (odd); jitter table
+       cells per pixel; field heights tabulated.
 
 Camera tracing (``sample_ray``) maps a film sample to pixel coordinates, inverts the
 distortion (Newton's method, iteration count fixed at construction by a float64 check over
@@ -73,7 +106,7 @@ point through the chief ray's point on the focus plane. Particle tracing
 (``sample_direction``) runs the forward model: point -> (aperture point ->) focus plane ->
 normalised coordinates -> distortion -> pixel, with the importance
 ``f_px^2 |det J_distortion| / (N_pixels cos^3 theta)``. A distortion that folds over inside
-the image is rejected at construction. Distortion and aperture code is only traced when
+the image is rejected at construction. Distortion, aperture and PSF code is only traced when
 the scene asks for it.
 
 .. code-block:: xml
@@ -97,6 +130,7 @@ import mitsuba as mi
 import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
+from mitpiv.imaging import RenderPSF
 from mitpiv.physics.camera import PinholeCamera, place_camera
 from mitpiv.physics.distortion import Distortion, distort_jacobian, percent_to_k1, undistort
 from mitpiv.render.plugins._props import PropertyReader
@@ -161,6 +195,7 @@ class DistortedPinhole(mi.Sensor):
         self.far_clip = check_positive("far_clip", rd.float("far_clip", 1e7), owner="distorted_pinhole", unit="mm")
         if self.far_clip <= self.near_clip:
             raise ConfigError(f"distorted_pinhole: far_clip ({self.far_clip}) must exceed near_clip ({self.near_clip}).")
+        psf_props = _read_psf_props(rd, f_number, focus, focal, pitch)
         rd.finish()
 
         cam = PinholeCamera((w, h), focal, pitch, rotation=rotation, position_mm=position,
@@ -172,7 +207,10 @@ class DistortedPinhole(mi.Sensor):
         # Folding check and Newton iteration count (float64, over the whole image).
         self.newton_iterations = cam.validate_distortion()
         self.camera = cam
-        self.m_needs_sample_3 = cam.f_number is not None
+        self.psf = None if psf_props is None else _make_psf(psf_props, film)
+        self.m_needs_sample_3 = cam.f_number is not None or self.psf_mode == "jitter"
+        if self.psf_mode == "jitter":
+            self._build_psf_sampler(cam)
 
         # Constants for the kernels (Python floats: baked into the traced code).
         self._fx = cam.focal_px
@@ -197,11 +235,68 @@ class DistortedPinhole(mi.Sensor):
             xd, yd = undistort(xd, yd, d, iterations=self.newton_iterations)
         return -xd, -yd  # OpenCV (x right, y down) -> Mitsuba (x left, y up)
 
+    @property
+    def psf_mode(self) -> str:
+        return "none" if self.psf is None else self.psf.mode
+
+    def _build_psf_sampler(self, cam):
+        tables, size, levels = self.psf.jitter_tables()
+        cdf = np.cumsum(tables.reshape(levels, -1), axis=1)
+        cdf /= cdf[:, -1:]
+        cdf += np.arange(levels)[:, None]
+        self._psf_cdf = mi.Float(cdf.ravel().astype(np.float32))
+        self._psf_size = size
+        self._psf_levels = levels
+        self._psf_cell_px = 1.0 / self.psf.table_oversample
+        w, h = self.resolution
+        cx, cy = cam.principal_point_px
+        self._psf_inv_h2 = 1.0 / max((u - cx) ** 2 + (v - cy) ** 2 for u in (0, w) for v in (0, h))
+
+    def _psf_offset(self, u, v, s):
+        """Offset (dx, dy) [px] drawn from the PSF at film position (u, v), from uniforms s."""
+        sx, sy = s.x, s.y
+        if self._psf_levels > 1:
+            t = dr.clip(((u - self._cx) ** 2 + (v - self._cy) ** 2) * self._psf_inv_h2, 0.0, 1.0) * (self._psf_levels - 1)
+            k0 = dr.minimum(mi.UInt32(dr.floor(t)), self._psf_levels - 2)
+            frac = t - mi.Float(k0)
+            up = sy < frac
+            sy = dr.select(up, sy / dr.maximum(frac, 1e-12), (sy - frac) / dr.maximum(1.0 - frac, 1e-12))
+            level = mi.Float(k0 + dr.select(up, 1, 0))
+        else:
+            level = mi.Float(0.0)
+        target = level + dr.minimum(sx, 0.999999)
+        cdf = self._psf_cdf
+        n = dr.width(cdf)
+        idx = dr.binary_search(0, n - 1, lambda i: dr.gather(mi.Float, cdf, i) <= target)
+        prev = dr.select(idx > 0, dr.gather(mi.Float, cdf, dr.maximum(idx, 1) - 1), 0.0)
+        cell = dr.maximum(dr.gather(mi.Float, cdf, idx) - prev, 1e-30)
+        ux = dr.clip((target - prev) / cell, 0.0, 1.0)
+        ss = self._psf_size * self._psf_size
+        j = idx % ss
+        row = mi.Float(j // self._psf_size)
+        col = mi.Float(j % self._psf_size)
+        half = self._psf_size // 2
+        return (col - half + ux - 0.5) * self._psf_cell_px, (row - half + sy - 0.5) * self._psf_cell_px
+
+    @staticmethod
+    def _hash2(a, b):
+        """Two uniforms decorrelated from the 2D samples a, b (TEA hash of their bits)."""
+        ax = dr.reinterpret_array(mi.UInt32, a.x)
+        ay = dr.reinterpret_array(mi.UInt32, a.y)
+        bx = dr.reinterpret_array(mi.UInt32, b.x)
+        by = dr.reinterpret_array(mi.UInt32, b.y)
+        return mi.Point2f(mi.sample_tea_float32(ax ^ by, ay), mi.sample_tea_float32(ay ^ bx, ax ^ 0x9E3779B9))
+
     # ------------------------------------------------------------------ camera tracing
     def sample_ray(self, time, sample1, sample2, sample3, active=True):
         wavelengths, wav_weight = self.sample_wavelengths(dr.zeros(mi.SurfaceInteraction3f), sample1, active)
         w, h = self.resolution
-        lx, ly = self._pixel_to_local_dir(sample2.x * w, sample2.y * h)
+        u, v = sample2.x * w, sample2.y * h
+        if self.psf_mode == "jitter":
+            s = sample3 if self.camera.f_number is None else self._hash2(sample2, sample3)
+            dx, dy = self._psf_offset(u, v, s)
+            u, v = u - dx, v - dy  # I(x) = E[I0(x - delta)], delta ~ PSF
+        lx, ly = self._pixel_to_local_dir(u, v)
         if self.camera.f_number is None:
             d_local = dr.normalize(mi.Vector3f(lx, ly, 1.0))
             o_local = mi.Point3f(0.0)
@@ -252,10 +347,16 @@ class DistortedPinhole(mi.Sensor):
         u = self._fx * xd + self._cx
         v = self._fx * yd + self._cy
         w, h = self.resolution
+        if self.psf_mode == "jitter":
+            s = sample if self.camera.f_number is None else self._hash2(sample, mi.Point2f(xd, yd))
+            dx, dy = self._psf_offset(u, v, s)
+            u, v = u + dx, v + dy
         active &= (u >= 0) & (u <= w) & (v >= 0) & (v <= h)
         importance = (self._fx * self._fx / self._n_pix) * jac / (cos_t * cos_t * cos_t)
         ds = dr.zeros(mi.DirectionSample3f)
-        ds.uv = mi.Point2f(u, v)
+        # An oversampled film (PSF 'fft' mode, set by render_sensor) gets scaled positions.
+        scale = self.film().size()[0] / w
+        ds.uv = mi.Point2f(u, v) if scale == 1 else mi.Point2f(u * scale, v * scale)
         ds.p = self._pos + self._rot_to_world @ mi.Vector3f(a)
         ds.d = (ds.p - it.p) / dist
         ds.dist = dist
@@ -295,7 +396,7 @@ class DistortedPinhole(mi.Sensor):
         return (
             f"DistortedPinhole[resolution={c.resolution}, focal_length={c.focal_length_mm} mm, "
             f"pixel_pitch={c.pixel_pitch_um} um, distortion=({c.distortion}), "
-            f"f_number={c.f_number}, focus_distance={c.focus_distance_mm} mm]"
+            f"f_number={c.f_number}, focus_distance={c.focus_distance_mm} mm, psf={self.psf_mode}]"
         )
 
     def describe(self) -> dict:
@@ -304,7 +405,65 @@ class DistortedPinhole(mi.Sensor):
         d["distortion_percent"] = self.distortion_percent
         d["near_clip_mm"], d["far_clip_mm"] = self.near_clip, self.far_clip
         d["newton_iterations"] = self.newton_iterations
+        d["psf"] = None if self.psf is None else self.psf.to_dict()
         return d
+
+
+def _read_psf_props(rd, f_number, focus, focal, pitch):
+    """Read the psf_* properties (None when the scene asks for no PSF)."""
+    mode = rd.string("psf", "none")
+    names = ("psf_f_number", "psf_wavelength_nm", "psf_magnification", "psf_zernike", "psf_defocus_waves",
+             "psf_spherical_waves", "psf_defocus_corner_waves", "psf_energy_tolerance", "psf_oversample",
+             "psf_table_oversample", "psf_field_levels")
+    if mode == "none":
+        given = [k for k in names if rd.has(k)]
+        if given:
+            raise ConfigError(f"distorted_pinhole: {given} given but psf is 'none'; add <string name=\"psf\" value=\"fft\"/> or \"jitter\".")
+        return None
+    n = rd.float("psf_f_number", f_number)
+    if n is None:
+        raise ConfigError("distorted_pinhole: psf needs 'psf_f_number' (the camera is a pinhole, without 'f_number').")
+    mag = rd.float("psf_magnification", None)
+    if mag is None and f_number is not None and focus is not None and focal is not None and focus > focal:
+        mag = focal / (focus - focal)
+    coefs = {}
+    text = rd.string("psf_zernike", "")
+    for item in filter(None, (t.strip() for t in text.split(","))):
+        try:
+            j, c = item.split(":")
+            coefs[int(j)] = coefs.get(int(j), 0.0) + float(c)
+        except ValueError:
+            raise ConfigError(
+                f"distorted_pinhole: parameter 'psf_zernike' must read 'noll:waves, ...' (e.g. '11:0.05, 8:0.02'), "
+                f"got {text!r}."
+            ) from None
+    for j, key in ((4, "psf_defocus_waves"), (11, "psf_spherical_waves")):
+        c = rd.float(key, 0.0)
+        if c:
+            coefs[j] = coefs.get(j, 0.0) + c
+    return dict(mode=mode, f_number=n, pixel_pitch_um=pitch, wavelength_nm=rd.float("psf_wavelength_nm", 532.0),
+                magnification=mag, zernike_coefficients=tuple(sorted(coefs.items())),
+                defocus_corner_waves=rd.float("psf_defocus_corner_waves", 0.0),
+                energy_tolerance=rd.float("psf_energy_tolerance", 1e-3), oversample=rd.int("psf_oversample", 5),
+                table_oversample=rd.int("psf_table_oversample", 8), field_levels=rd.int("psf_field_levels", 16))
+
+
+_PSF_FILTERS = {"fft": ("TentFilter", "CatmullRomFilter", "LanczosSincFilter"), "jitter": ("BoxFilter",)}
+
+
+def _make_psf(props: dict, film) -> RenderPSF:
+    psf = RenderPSF(**props)
+    # FFT: an interpolating splat keeps the sub-pixel position of a particle on the fine
+    # film; jitter: the PSF is sampled already, the box filter integrates over the pixel.
+    have = film.rfilter().class_name()
+    if have not in _PSF_FILTERS[psf.mode]:
+        names = {"TentFilter": "tent", "CatmullRomFilter": "catmullrom", "LanczosSincFilter": "lanczos", "BoxFilter": "box"}
+        ok = " or ".join(f'<rfilter type="{names[k]}"/>' for k in _PSF_FILTERS[psf.mode])
+        raise ConfigError(
+            f"distorted_pinhole: psf '{psf.mode}' needs the film's reconstruction filter to be {ok} "
+            f"(got {have}); set it in the film."
+        )
+    return psf
 
 
 mi.register_sensor("distorted_pinhole", lambda props: DistortedPinhole(props))

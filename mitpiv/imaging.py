@@ -1,0 +1,285 @@
+"""Post-optics on rendered images: PSF convolution and the camera sensor model.
+
+The sensor chain (each stage optional, applied in this order, vectorised, seeded)::
+
+    image [render units] --exposure--> mean photons per pixel
+      --quantum_efficiency, shot_noise--> photoelectrons   (Poisson(QE * photons); QE thins a
+                                                             Poisson stream into a Poisson stream)
+      --dark_current--> + Poisson(dark_current_e_per_s * exposure_time_s)
+      --full_well-->    min(electrons, full_well_e)
+      --read_noise-->   + Normal(0, read_noise_e)
+      --gain-->         counts = electrons / gain_e_per_count + black_level
+      --gaussian_noise_percent--> + Normal(0, X/100 * peak counts)   (the simple model of
+                                                             tomographic simulation studies)
+      --bit_depth-->    round to integers, clip to [0, 2^bits - 1]
+
+``exposure`` converts the renderer's pixel values to mean photon counts (photons per pixel
+per unit of image value); ``peak_photons`` is the alternative that scales the brightest
+pixel to that many photons. With ``bit_depth`` the result is an unsigned integer array
+(uint8 for 8 bits, uint16 up to 16); without, float64 counts.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from mitpiv.errors import ConfigError, check_positive
+
+__all__ = ["SensorModel", "apply_sensor", "convolve_psf", "sensor_mean_variance"]
+
+_BIT_DEPTHS = (8, 10, 12, 14, 16)
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """Camera sensor parameters; ``None`` / ``False`` switches a stage off.
+
+    Attributes
+    ----------
+    exposure : photons per pixel per unit of image value.
+    peak_photons : alternative to ``exposure``: the image maximum becomes this many photons.
+    quantum_efficiency : electrons per photon, in (0, 1].
+    shot_noise : Poisson photon (shot) noise.
+    dark_current_e_per_s, exposure_time_s : dark electrons (Poisson) = rate x time.
+    full_well_e : saturation [electrons].
+    read_noise_e : Gaussian read noise [electrons RMS].
+    gain_e_per_count : conversion gain [electrons per count (ADU)].
+    black_level : offset added to the counts [ADU].
+    gaussian_noise_percent : white Gaussian noise with sigma = this percentage of ``peak``
+        (default the noise-free image maximum, in counts), as in tomographic PIV studies.
+    bit_depth : 8, 10, 12, 14 or 16; rounds and clips to the ADC range.
+    """
+
+    exposure: float | None = None
+    peak_photons: float | None = None
+    quantum_efficiency: float = 1.0
+    shot_noise: bool = False
+    dark_current_e_per_s: float = 0.0
+    exposure_time_s: float = 0.0
+    full_well_e: float | None = None
+    read_noise_e: float = 0.0
+    gain_e_per_count: float = 1.0
+    black_level: float = 0.0
+    gaussian_noise_percent: float = 0.0
+    peak: float | None = None
+    bit_depth: int | None = None
+
+    def __post_init__(self):
+        def nonneg(name):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0):
+                raise ConfigError(f"sensor: parameter '{name}' must be a finite number >= 0, got {v!r}.")
+
+        if self.exposure is not None and self.peak_photons is not None:
+            raise ConfigError("sensor: give 'exposure' or 'peak_photons', not both.")
+        for name in ("exposure", "peak_photons", "full_well_e", "peak"):
+            if getattr(self, name) is not None:
+                check_positive(name, getattr(self, name), owner="sensor")
+        for name in ("dark_current_e_per_s", "exposure_time_s", "read_noise_e", "black_level", "gaussian_noise_percent"):
+            nonneg(name)
+        qe = self.quantum_efficiency
+        if not (isinstance(qe, (int, float)) and 0 < qe <= 1):
+            raise ConfigError(f"sensor: parameter 'quantum_efficiency' must be in (0, 1], got {qe!r}.")
+        check_positive("gain_e_per_count", self.gain_e_per_count, owner="sensor")
+        if self.bit_depth is not None and self.bit_depth not in _BIT_DEPTHS:
+            raise ConfigError(f"sensor: parameter 'bit_depth' must be one of {_BIT_DEPTHS} or None, got {self.bit_depth!r}.")
+        if self.shot_noise and self.exposure is None and self.peak_photons is None:
+            raise ConfigError(
+                "sensor: 'shot_noise' needs photon counts: give 'exposure' (photons per unit of "
+                "image value) or 'peak_photons'."
+            )
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def apply_sensor(image, model: SensorModel | None = None, *, seed: int = 0, **kwargs) -> np.ndarray:
+    """Turn a rendered image into sensor counts.
+
+    Parameters
+    ----------
+    image : (H, W) array
+        Rendered image (finite, >= 0).
+    model : SensorModel, optional
+        Sensor parameters; keyword arguments build one (``apply_sensor(img, bit_depth=8,
+        gaussian_noise_percent=5)``) or override fields of ``model``.
+    seed : int
+        Seed of the noise (NumPy's PCG64); the same seed gives the same image.
+
+    Returns
+    -------
+    uint8 / uint16 array with ``bit_depth``, else float64 counts.
+    """
+    if model is None:
+        model = SensorModel(**kwargs)
+    elif kwargs:
+        model = SensorModel(**{**model.to_dict(), **kwargs})
+    img = np.asarray(image, dtype=np.float64)
+    if img.ndim != 2 or img.size == 0:
+        raise ConfigError(f"apply_sensor: image must be a non-empty 2D array, got shape {img.shape}.")
+    if not np.all(np.isfinite(img)) or np.any(img < 0):
+        raise ConfigError("apply_sensor: image must be finite and >= 0 (a rendered irradiance).")
+    rng = np.random.default_rng(seed)
+    m = model
+    if m.peak_photons is not None:
+        top = img.max()
+        photons = img * (m.peak_photons / top) if top > 0 else img * 0.0
+    elif m.exposure is not None:
+        photons = img * m.exposure
+    else:
+        photons = img  # image values are photons already
+    mean_e = photons * m.quantum_efficiency
+    e = rng.poisson(mean_e).astype(np.float64) if m.shot_noise else mean_e
+    dark = m.dark_current_e_per_s * m.exposure_time_s
+    if dark > 0:
+        e = e + rng.poisson(dark, size=e.shape)
+    if m.full_well_e is not None:
+        e = np.minimum(e, m.full_well_e)
+    if m.read_noise_e > 0:
+        e = e + rng.normal(0.0, m.read_noise_e, size=e.shape)
+    counts = e / m.gain_e_per_count + m.black_level
+    if m.gaussian_noise_percent > 0:
+        peak = m.peak if m.peak is not None else float(np.max(mean_e)) / m.gain_e_per_count
+        counts = counts + rng.normal(0.0, m.gaussian_noise_percent / 100.0 * peak, size=counts.shape)
+    if m.bit_depth is None:
+        return counts
+    top = 2 ** m.bit_depth - 1
+    out = np.clip(np.rint(counts), 0, top)
+    return out.astype(np.uint8 if m.bit_depth == 8 else np.uint16)
+
+
+def sensor_mean_variance(signal_photons: float, model: SensorModel) -> tuple[float, float]:
+    """Mean and variance of the counts for a uniform signal (before clipping/rounding).
+
+    The photon-transfer relation: ``var = (QE S [shot] + D t) / g^2 + sigma_r^2 / g^2
+    + (X/100 peak)^2``, ``mean = (QE S + D t) / g + black``.
+    """
+    qe_s = model.quantum_efficiency * signal_photons
+    dark = model.dark_current_e_per_s * model.exposure_time_s
+    g = model.gain_e_per_count
+    var = ((qe_s if model.shot_noise else 0.0) + dark + model.read_noise_e**2) / g**2
+    if model.gaussian_noise_percent > 0:
+        peak = model.peak if model.peak is not None else qe_s / g
+        var += (model.gaussian_noise_percent / 100.0 * peak) ** 2
+    return (qe_s + dark) / g + model.black_level, var
+
+
+def convolve_psf(image, kernel) -> np.ndarray:
+    """Convolve an image with a (space-invariant) PSF kernel by FFT; same shape as ``image``.
+
+    The kernel's centre pixel (index ``size // 2``) is the origin; energy leaving the image
+    edge is lost, as on a real sensor. Negative round-off is clipped to zero.
+    """
+    from scipy.signal import fftconvolve
+
+    img = np.asarray(image, dtype=np.float64)
+    k = np.asarray(kernel, dtype=np.float64)
+    if img.ndim != 2 or k.ndim != 2:
+        raise ConfigError(f"convolve_psf: image and kernel must be 2D, got {img.shape} and {k.shape}.")
+    if k.shape[0] % 2 == 0 or k.shape[1] % 2 == 0:
+        raise ConfigError(f"convolve_psf: kernel sides must be odd (a centre pixel), got {k.shape}.")
+    return np.maximum(fftconvolve(img, k, mode="same"), 0.0)
+
+
+# ---------------------------------------------------------------------- PSF in rendering
+_PSF_MODES = ("none", "fft", "jitter")
+
+
+@dataclass(frozen=True)
+class RenderPSF:
+    """The diffraction/aberration PSF a camera applies to its rendered image.
+
+    ``mode="fft"``: space invariant. The camera renders its film ``oversample`` times finer
+    (odd, so a pixel centre is a fine-pixel centre) with a tent filter, which keeps each
+    particle's sub-pixel position to first order; :meth:`apply` convolves that image with
+    the PSF integrated over a whole pixel and sampled at the fine spacing, and keeps the
+    pixel centres. The error falls as ``1 / oversample^2``.
+    ``mode="jitter"``: the camera displaces each ray's film position by an offset drawn from
+    the PSF (camera tracing: ``x - delta``; particle tracing: ``x + delta``), and the box
+    filter integrates over pixels. The PSF may vary over the field: ``defocus_corner_waves``
+    adds defocus growing as ``(h / h_corner)^2`` (field curvature), tabulated at
+    ``field_levels`` heights evenly spaced in ``h^2`` and mixed linearly between them.
+    Tables are sampled at ``pixel / table_oversample``.
+
+    In both modes the PSF window holds ``1 - energy_tolerance`` of the light and is
+    renormalised to 1, so the PSF moves light but neither adds nor removes any.
+    """
+
+    mode: str
+    f_number: float
+    pixel_pitch_um: float
+    wavelength_nm: float = 532.0
+    magnification: float | None = None
+    zernike_coefficients: tuple = ()  # ((noll index, waves RMS), ...)
+    defocus_corner_waves: float = 0.0
+    energy_tolerance: float = 1e-3
+    oversample: int = 5
+    table_oversample: int = 8
+    field_levels: int = 16
+
+    def __post_init__(self):
+        if self.mode not in _PSF_MODES:
+            raise ConfigError(f"psf: parameter 'psf' must be one of {_PSF_MODES}, got {self.mode!r}.")
+        if self.mode == "fft" and self.defocus_corner_waves != 0.0:
+            raise ConfigError(
+                "psf: 'psf_defocus_corner_waves' makes the PSF vary over the field; the FFT mode "
+                "is space invariant. Use psf='jitter'."
+            )
+        for name in ("oversample", "table_oversample", "field_levels"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ConfigError(f"psf: parameter '{name}' must be a positive integer, got {v!r}.")
+        if self.oversample % 2 == 0:
+            raise ConfigError(f"psf: parameter 'psf_oversample' must be odd (pixel centres on fine-pixel centres), got {self.oversample}.")
+        if self.field_levels < 2 and self.defocus_corner_waves != 0.0:
+            raise ConfigError("psf: 'psf_field_levels' must be >= 2 with a field-dependent PSF.")
+        # Validate the optics once (raises ConfigError for bad values).
+        self.kernel_at(0.0, pitch_um=self.pixel_pitch_um)
+
+    def kernel_at(self, field_fraction_sq: float, *, pitch_um: float) -> np.ndarray:
+        """Window-normalised PSF integrated over cells of ``pitch_um``, at field height^2 fraction."""
+        from mitpiv.physics.psf import psf
+
+        coefs = dict(self.zernike_coefficients)
+        return psf(f_number=self.f_number, pixel_pitch_um=pitch_um, wavelength_nm=self.wavelength_nm,
+                   magnification=self.magnification, zernike_coefficients=coefs,
+                   defocus_waves=self.defocus_corner_waves * field_fraction_sq,
+                   energy_tolerance=self.energy_tolerance, normalize="window")
+
+    def fft_kernel(self) -> np.ndarray:
+        """PSF integrated over a whole pixel, sampled every ``pixel / oversample``."""
+        from scipy.signal import fftconvolve
+
+        s = self.oversample
+        fine = self.kernel_at(0.0, pitch_um=self.pixel_pitch_um / s)
+        return fftconvolve(fine, np.ones((s, s)), mode="full")
+
+    def apply(self, fine_image) -> np.ndarray:
+        """FFT mode: oversampled render (H s, W s) -> PSF-convolved image (H, W)."""
+        s = self.oversample
+        img = np.asarray(fine_image, dtype=np.float64)
+        if img.shape[0] % s or img.shape[1] % s:
+            raise ConfigError(f"psf: the rendered image {img.shape} is not {s} times the camera resolution.")
+        out = convolve_psf(img, self.fft_kernel()) / (s * s)
+        return out[s // 2::s, s // 2::s]
+
+    def jitter_tables(self) -> tuple[np.ndarray, int, int]:
+        """(cell probabilities (levels, S, S), S, levels) for the jitter sampler."""
+        levels = self.field_levels if self.defocus_corner_waves != 0.0 else 1
+        q = self.pixel_pitch_um / self.table_oversample
+        ks = [self.kernel_at(k / max(levels - 1, 1), pitch_um=q) for k in range(levels)]
+        size = max(k.shape[0] for k in ks)
+        out = np.zeros((levels, size, size))
+        for i, k in enumerate(ks):
+            o = (size - k.shape[0]) // 2
+            out[i, o:o + k.shape[0], o:o + k.shape[0]] = k / k.sum()
+        return out, size, levels
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["zernike_coefficients"] = {f"noll{j}": c for j, c in self.zernike_coefficients}
+        d["indexing"] = "noll"
+        return d
