@@ -47,3 +47,7 @@ def check_positive(name: str, value, *, owner: str = "", unit: str = "") -> floa
 
 def _u(unit: str) -> str:
     return f" [{unit}]" if unit else ""
+
+
+class CalibrationError(MitpivError, ValueError):
+    """A calibration cannot be fitted reliably (too few or degenerate markers, bad residual)."""

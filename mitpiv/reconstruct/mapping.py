@@ -1,0 +1,140 @@
+"""Camera mappings world [mm] -> pixels, with the derivative reconstruction needs.
+
+Every mapping has ``project(p_world) -> (..., 2)`` pixels (mitpiv convention: pixel
+``(i, j)`` spans ``[i, i+1)``, so its centre is at ``i + 0.5``) and ``jacobian(p_world) ->
+(..., 2, 3)`` = d(pixel)/d(world). Mappings:
+
+- :class:`PinholeMapping`: pinhole + Brown-Conrady (a :class:`PinholeCamera`), either the
+  true model from EXR metadata (:func:`mapping_from_metadata`, "perfect calibration") or
+  one fitted by :func:`mitpiv.reconstruct.calibrate`.
+- :class:`PolynomialMapping`: Soloff's polynomial, cubic in x and y and quadratic in z (19
+  terms per image coordinate), fitted by least squares on normalised coordinates.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mitpiv.errors import ConfigError
+from mitpiv.physics.camera import PinholeCamera
+from mitpiv.physics.distortion import distort_jacobian
+
+__all__ = ["CameraMapping", "PinholeMapping", "PolynomialMapping", "mapping_from_metadata", "SOLOFF_TERMS"]
+
+#: exponents (i, j, k) of x^i y^j z^k in Soloff's polynomial: i + j <= 3, k <= 2, i + j + k <= 3
+SOLOFF_TERMS = tuple((i, j, k) for k in range(3) for n in range(4 - k) for i in range(n, -1, -1) for j in [n - i])
+
+
+class CameraMapping:
+    """Base class: subclasses implement ``project`` and ``jacobian``."""
+
+    resolution: tuple[int, int] | None = None
+
+    def project(self, p_world) -> np.ndarray:
+        raise NotImplementedError
+
+    def jacobian(self, p_world) -> np.ndarray:
+        raise NotImplementedError
+
+    def residuals(self, pixels, p_world) -> np.ndarray:
+        """Reprojection error vectors [px]: project(world) - pixels."""
+        return self.project(p_world) - np.asarray(pixels, dtype=float)
+
+    def rms_error(self, pixels, p_world) -> float:
+        r = self.residuals(pixels, p_world)
+        return float(np.sqrt(np.mean(np.sum(r * r, axis=-1))))
+
+
+class PinholeMapping(CameraMapping):
+    """Pinhole + Brown-Conrady mapping of a :class:`PinholeCamera`."""
+
+    def __init__(self, camera: PinholeCamera):
+        self.camera = camera
+        self.resolution = camera.resolution
+
+    def project(self, p_world) -> np.ndarray:
+        return self.camera.project(p_world)
+
+    def jacobian(self, p_world) -> np.ndarray:
+        c = self.camera
+        pc = c.world_to_camera(p_world)
+        z = pc[..., 2]
+        x, y = pc[..., 0] / z, pc[..., 1] / z
+        _, _, a, b, cc, e = distort_jacobian(x, y, c.distortion)
+        f = c.focal_px
+        # d(x, y)/d(p_camera)
+        dn = np.zeros(pc.shape[:-1] + (2, 3))
+        dn[..., 0, 0] = 1 / z
+        dn[..., 0, 2] = -x / z
+        dn[..., 1, 1] = 1 / z
+        dn[..., 1, 2] = -y / z
+        dd = np.stack([np.stack([a, b], -1), np.stack([cc, e], -1)], -2) * f
+        return dd @ dn @ c.rotation
+
+    def to_dict(self) -> dict:
+        return {"type": "pinhole", "camera": self.camera.to_dict()}
+
+
+def mapping_from_metadata(meta: dict) -> PinholeMapping:
+    """The true mapping of a rendered image from its EXR metadata (``meta["camera"]``)."""
+    cam = meta.get("camera", meta)
+    if not isinstance(cam, dict) or "R" not in cam or "focal_length_mm" not in cam:
+        raise ConfigError(
+            "mapping_from_metadata: the metadata has no pinhole camera model (expected "
+            "meta['camera'] with 'R', 'focal_length_mm', ...); was the image rendered by a "
+            "distorted_pinhole sensor?"
+        )
+    return PinholeMapping(PinholeCamera.from_dict(cam))
+
+
+class PolynomialMapping(CameraMapping):
+    """Soloff polynomial mapping (19 terms per image coordinate) on normalised coordinates."""
+
+    def __init__(self, coefficients, centre_mm, scale_mm, resolution=None):
+        self.coefficients = np.asarray(coefficients, dtype=float).reshape(2, len(SOLOFF_TERMS))
+        self.centre_mm = np.asarray(centre_mm, dtype=float).reshape(3)
+        self.scale_mm = np.asarray(scale_mm, dtype=float).reshape(3)
+        self.resolution = None if resolution is None else tuple(int(v) for v in resolution)
+
+    @staticmethod
+    def design(q) -> np.ndarray:
+        """Monomials of normalised coordinates q (..., 3) -> (..., 19)."""
+        return np.stack([q[..., 0] ** i * q[..., 1] ** j * q[..., 2] ** k for i, j, k in SOLOFF_TERMS], axis=-1)
+
+    @classmethod
+    def fit(cls, pixels, p_world, *, resolution=None) -> PolynomialMapping:
+        """Least-squares fit (the caller checks the marker set; see :func:`calibrate`)."""
+        w = np.asarray(p_world, dtype=float).reshape(-1, 3)
+        px = np.asarray(pixels, dtype=float).reshape(-1, 2)
+        centre = 0.5 * (w.max(axis=0) + w.min(axis=0))
+        scale = 0.5 * (w.max(axis=0) - w.min(axis=0))
+        scale[scale == 0] = 1.0
+        a = cls.design((w - centre) / scale)
+        coef, *_ = np.linalg.lstsq(a, px, rcond=None)
+        return cls(coef.T, centre, scale, resolution)
+
+    def project(self, p_world) -> np.ndarray:
+        q = (np.asarray(p_world, dtype=float) - self.centre_mm) / self.scale_mm
+        return self.design(q) @ self.coefficients.T
+
+    def jacobian(self, p_world) -> np.ndarray:
+        q = (np.asarray(p_world, dtype=float) - self.centre_mm) / self.scale_mm
+        cols = []
+        for axis in range(3):
+            terms = []
+            for e in SOLOFF_TERMS:
+                if e[axis] == 0:
+                    terms.append(np.zeros(q.shape[:-1]))
+                    continue
+                val = e[axis] * q[..., axis] ** (e[axis] - 1)
+                for other in range(3):
+                    if other != axis:
+                        val = val * q[..., other] ** e[other]
+                terms.append(val)
+            cols.append(np.stack(terms, axis=-1) @ self.coefficients.T / self.scale_mm[axis])
+        return np.stack(cols, axis=-1)
+
+    def to_dict(self) -> dict:
+        return {"type": "soloff_polynomial", "terms": [list(t) for t in SOLOFF_TERMS],
+                "coefficients": self.coefficients.tolist(), "centre_mm": self.centre_mm.tolist(),
+                "scale_mm": self.scale_mm.tolist(), "resolution": None if self.resolution is None else list(self.resolution)}
