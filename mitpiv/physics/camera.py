@@ -24,7 +24,15 @@ import numpy as np
 from mitpiv.errors import ConfigError, check_positive
 from mitpiv.physics.distortion import Distortion, check_distortion, distort, undistort
 
-__all__ = ["PinholeCamera", "look_at_rotation", "place_camera"]
+__all__ = [
+    "PinholeCamera",
+    "look_at_rotation",
+    "place_camera",
+    "ring_arrangement",
+    "planar_array",
+    "scatter_arrangement",
+    "scheimpflug",
+]
 
 # OpenCV camera frame -> Mitsuba camera frame (x and y flip).
 _CV_TO_MI = np.diag([-1.0, -1.0, 1.0])
@@ -282,3 +290,156 @@ def place_camera(
         # Image "up" along the sheet normal unless the camera looks along it.
         up = e3 if abs(direction @ e3) < 0.99 else e2
     return look_at_rotation(position, target, up=up), position
+
+
+# ---------------------------------------------------------------------- arrangements
+def _entry(rotation, position, target, e1, extra=None) -> dict:
+    d = position - target
+    cos_scatter = float((d / np.linalg.norm(d)) @ e1)  # laser direction vs direction towards the camera
+    out = {"rotation": rotation, "position_mm": position,
+           "scattering_angle_deg": float(np.degrees(np.arccos(np.clip(cos_scatter, -1, 1))))}
+    out.update(extra or {})
+    return out
+
+
+def ring_arrangement(
+    n: int,
+    *,
+    distance_mm: float,
+    elevation_deg: float,
+    azimuth_start_deg: float = 0.0,
+    azimuth_span_deg: float = 360.0,
+    target_mm=(0.0, 0.0, 0.0),
+    laser_direction=(1.0, 0.0, 0.0),
+    sheet_normal=(0.0, 0.0, 1.0),
+) -> list[dict]:
+    """``n`` cameras on a cone (fixed elevation) around the target, evenly spread in azimuth.
+
+    A full ring (span 360) spaces them ``360 / n`` apart; a partial span places the first
+    and last camera at its ends. Angles in the laser-sheet frame of :func:`place_camera`.
+    Each entry: ``rotation``, ``position_mm``, ``azimuth_deg``, ``elevation_deg``,
+    ``scattering_angle_deg``.
+    """
+    if isinstance(n, bool) or int(n) != n or n < 1:
+        raise ConfigError(f"ring_arrangement: 'n' must be a positive integer, got {n!r}.")
+    n = int(n)
+    if azimuth_span_deg >= 360.0:
+        az = azimuth_start_deg + 360.0 * np.arange(n) / n
+    else:
+        az = azimuth_start_deg + (np.linspace(0.0, azimuth_span_deg, n) if n > 1 else np.zeros(1))
+    return scatter_list(az, np.full(n, float(elevation_deg)), distance_mm, target_mm, laser_direction, sheet_normal)
+
+
+def scatter_list(az, el, distance_mm, target_mm, laser_direction, sheet_normal) -> list[dict]:
+    e1 = np.asarray(laser_direction, dtype=float)
+    e1 = e1 / np.linalg.norm(e1)
+    out = []
+    for a, e in zip(az, el, strict=True):
+        rot, pos = place_camera(target_mm=target_mm, azimuth_deg=float(a), elevation_deg=float(e),
+                                distance_mm=distance_mm, laser_direction=laser_direction, sheet_normal=sheet_normal)
+        out.append(_entry(rot, pos, np.asarray(target_mm, float), e1, {"azimuth_deg": float(a), "elevation_deg": float(e)}))
+    return out
+
+
+def scatter_arrangement(
+    kind: str,
+    *,
+    n: int = 4,
+    azimuth_deg: float = 25.0,
+    elevation_deg: float = 35.0,
+    distance_mm: float,
+    target_mm=(0.0, 0.0, 0.0),
+    laser_direction=(1.0, 0.0, 0.0),
+    sheet_normal=(0.0, 0.0, 1.0),
+) -> list[dict]:
+    """Tomographic arrangements relative to the laser direction (n = 2 or 4 cameras).
+
+    - ``"forward"``: cameras at azimuth +-``azimuth_deg`` (and elevation +-``elevation_deg``
+      for 4), all seeing forward scatter (scattering angle acos(cos el cos az) < 90 deg).
+    - ``"backward"``: the same about azimuth 180 (backward scatter).
+    - ``"symmetric"``: mirror pairs about the plane normal to the laser: azimuths
+      ``a`` and ``180 - a`` (and their negatives for 4) at elevation ``elevation_deg``,
+      half in forward and half in backward scatter (the pyramid of scenes/tomo4).
+    """
+    if n not in (2, 4):
+        raise ConfigError(f"scatter_arrangement: 'n' must be 2 or 4, got {n!r}.")
+    a, e = float(azimuth_deg), float(elevation_deg)
+    if kind == "forward":
+        az, el = ([a, -a], [e, e]) if n == 2 else ([a, -a, a, -a], [e, e, -e, -e])
+    elif kind == "backward":
+        az, el = ([180 - a, 180 + a], [e, e]) if n == 2 else ([180 - a, 180 + a, 180 - a, 180 + a], [e, e, -e, -e])
+    elif kind == "symmetric":
+        az, el = ([a, 180 - a], [e, e]) if n == 2 else ([a, -a, 180 - a, -(180 - a)], [e, e, e, e])
+    else:
+        raise ConfigError(f"scatter_arrangement: 'kind' must be 'forward', 'backward' or 'symmetric', got {kind!r}.")
+    return scatter_list(np.array(az), np.array(el), distance_mm, target_mm, laser_direction, sheet_normal)
+
+
+def planar_array(
+    rows: int,
+    cols: int,
+    *,
+    spacing_mm: float,
+    distance_mm: float,
+    target_mm=(0.0, 0.0, 0.0),
+    view_direction=(0.0, 0.0, -1.0),
+    up=(0.0, 1.0, 0.0),
+    laser_direction=(1.0, 0.0, 0.0),
+) -> list[dict]:
+    """A rows x cols camera array on a plane ``distance_mm`` from the target, all aimed at it.
+
+    The array plane is normal to ``view_direction`` (the direction the centre camera looks
+    along); cameras sit on a grid of pitch ``spacing_mm`` centred on the axis through the
+    target (e.g. the 5 x 5, 153 mm synthetic-aperture array). Row 0 is the top (along ``up``).
+    """
+    for name, v in (("rows", rows), ("cols", cols)):
+        if isinstance(v, bool) or int(v) != v or v < 1:
+            raise ConfigError(f"planar_array: '{name}' must be a positive integer, got {v!r}.")
+    spacing_mm = check_positive("spacing_mm", spacing_mm, owner="planar_array", unit="mm")
+    distance_mm = check_positive("distance_mm", distance_mm, owner="planar_array", unit="mm")
+    vd = np.asarray(view_direction, dtype=float)
+    vd = vd / np.linalg.norm(vd)
+    upv = np.asarray(up, dtype=float)
+    right = np.cross(vd, upv)
+    if np.linalg.norm(right) < 1e-9:
+        raise ConfigError("planar_array: 'up' must not be parallel to 'view_direction'.")
+    right /= np.linalg.norm(right)
+    upv = np.cross(right, vd)
+    target = np.asarray(target_mm, dtype=float)
+    centre = target - distance_mm * vd
+    e1 = np.asarray(laser_direction, dtype=float)
+    e1 = e1 / np.linalg.norm(e1)
+    out = []
+    for i in range(int(rows)):
+        for j in range(int(cols)):
+            pos = centre + ((j - (cols - 1) / 2) * right + ((rows - 1) / 2 - i) * upv) * spacing_mm
+            out.append(_entry(look_at_rotation(pos, target, up=upv), pos, target, e1, {"row": i, "col": j}))
+    return out
+
+
+def scheimpflug(rotation, position_mm, *, focal_length_mm: float, plane_point_mm, plane_normal) -> dict:
+    """Scheimpflug focusing of a thin-lens camera on a plane (e.g. the laser-sheet mid-plane).
+
+    The camera keeps its pose; the plane of focus becomes the given plane. Returns
+    ``focus_distance_mm`` (where the optical axis meets the plane), ``focus_plane_normal``
+    (for the ``distorted_pinhole`` property of that name), the object-plane tilt ``alpha``
+    (between the plane and the lens plane), the axial magnification ``M = f / (s - f)`` and
+    the sensor tilt a real camera needs, ``beta = atan(M tan(alpha))`` [deg].
+    """
+    f = check_positive("focal_length_mm", focal_length_mm, owner="scheimpflug", unit="mm")
+    r = np.asarray(rotation, dtype=float)
+    pos = np.asarray(position_mm, dtype=float)
+    n = np.asarray(plane_normal, dtype=float)
+    n = n / np.linalg.norm(n)
+    axis = r[2]  # optical axis (OpenCV z) in world
+    den = float(axis @ n)
+    if abs(den) < 1e-6:
+        raise ConfigError("scheimpflug: the optical axis is parallel to the plane; it never meets it.")
+    s = float((np.asarray(plane_point_mm, dtype=float) - pos) @ n) / den
+    if s <= f:
+        raise ConfigError(f"scheimpflug: the plane meets the optical axis {s:.4g} mm from the lens, inside the focal length {f} mm.")
+    alpha = float(np.degrees(np.arccos(min(1.0, abs(den)))))
+    m = f / (s - f)
+    beta = float(np.degrees(np.arctan(m * np.tan(np.radians(alpha)))))
+    return {"focus_distance_mm": s, "focus_plane_normal": n.tolist(), "object_tilt_deg": alpha,
+            "magnification": m, "sensor_tilt_deg": beta}

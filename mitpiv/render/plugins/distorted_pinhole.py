@@ -60,6 +60,14 @@
      - mm
      - --
      - In-focus distance along the optical axis (required with ``f_number``).
+   * - focus_plane_normal
+     - vector
+     - --
+     - optical axis
+     - Thin lens only: normal (world) of a tilted plane of focus through the axis point at
+       ``focus_distance_mm`` (Scheimpflug; see :func:`mitpiv.physics.camera.scheimpflug`).
+       The pixel mapping stays that of the untilted sensor; the importance carries the
+       Jacobian of the tilted-plane mapping, so both transport strategies agree.
    * - near_clip, far_clip
      - float
      - mm
@@ -191,6 +199,7 @@ class DistortedPinhole(mi.Sensor):
                           p1=rd.float("p1", 0.0), p2=rd.float("p2", 0.0))
         f_number = rd.float("f_number", None)
         focus = rd.float("focus_distance_mm", None)
+        focus_normal = rd.vector("focus_plane_normal", None)
         self.near_clip = check_positive("near_clip", rd.float("near_clip", 0.01), owner="distorted_pinhole", unit="mm")
         self.far_clip = check_positive("far_clip", rd.float("far_clip", 1e7), owner="distorted_pinhole", unit="mm")
         if self.far_clip <= self.near_clip:
@@ -207,6 +216,11 @@ class DistortedPinhole(mi.Sensor):
         # Folding check and Newton iteration count (float64, over the whole image).
         self.newton_iterations = cam.validate_distortion()
         self.camera = cam
+        self._focus_n = None
+        if focus_normal is not None:
+            if cam.f_number is None:
+                raise ConfigError("distorted_pinhole: 'focus_plane_normal' needs a thin lens ('f_number', 'focus_distance_mm').")
+            self._focus_n = _focus_plane_local(focus_normal, to_world, cam)
         self.psf = None if psf_props is None else _make_psf(psf_props, film)
         self.m_needs_sample_3 = cam.f_number is not None or self.psf_mode == "jitter"
         if self.psf_mode == "jitter":
@@ -278,6 +292,25 @@ class DistortedPinhole(mi.Sensor):
         half = self._psf_size // 2
         return (col - half + ux - 0.5) * self._psf_cell_px, (row - half + sy - 0.5) * self._psf_cell_px
 
+    def _tilted_focus(self, a, d):
+        """Image (x, y) (OpenCV normalised) of the ray a + t d via the tilted focus plane, and
+        |d(x, y)/d(xi, eta)| with (xi, eta) = (d.x, d.y) / d.z (the importance Jacobian)."""
+        nx, ny, nz = self._focus_n
+        xi, eta = d.x / d.z, d.y / d.z
+        c = nz * self.camera.focus_distance_mm - nx * a.x - ny * a.y
+        den = nx * xi + ny * eta + nz
+        t = c / den
+        t_xi, t_eta = -c * nx / (den * den), -c * ny / (den * den)
+        px, py, pz = a.x + t * xi, a.y + t * eta, t
+        inv = 1.0 / pz
+        x, y = px * inv, py * inv
+        # d(px, py, pz)/d(xi) = (t + xi t_xi, eta t_xi, t_xi); /d(eta) = (xi t_eta, t + eta t_eta, t_eta)
+        x_xi = (t + xi * t_xi - x * t_xi) * inv
+        y_xi = (eta * t_xi - y * t_xi) * inv
+        x_eta = (xi * t_eta - x * t_eta) * inv
+        y_eta = (t + eta * t_eta - y * t_eta) * inv
+        return -x, -y, dr.abs(x_xi * y_eta - x_eta * y_xi)
+
     @staticmethod
     def _hash2(a, b):
         """Two uniforms decorrelated from the 2D samples a, b (TEA hash of their bits)."""
@@ -304,6 +337,9 @@ class DistortedPinhole(mi.Sensor):
             f = self.camera.focus_distance_mm
             a = mi.warp.square_to_uniform_disk_concentric(sample3) * self._r_ap
             o_local = mi.Point3f(a.x, a.y, 0.0)
+            if self._focus_n is not None:  # chief ray meets the tilted plane of focus at s (lx, ly, 1)
+                nx, ny, nz = self._focus_n
+                f = (nz * self.camera.focus_distance_mm) / (nx * lx + ny * ly + nz)
             d_local = dr.normalize(mi.Vector3f(lx * f - a.x, ly * f - a.y, f))
         inv_z = dr.rcp(d_local.z)
         o_local = o_local + d_local * (self.near_clip * inv_z)
@@ -333,8 +369,11 @@ class DistortedPinhole(mi.Sensor):
             s = mi.warp.square_to_uniform_disk_concentric(sample) * self._r_ap
             a = mi.Point3f(s.x, s.y, 0.0)
             d = p - a
-            t = f * dr.rcp(d.z)
-            xn, yn = -(a.x + d.x * t) / f, -(a.y + d.y * t) / f
+            if self._focus_n is None:
+                t = f * dr.rcp(d.z)
+                xn, yn = -(a.x + d.x * t) / f, -(a.y + d.y * t) / f
+            else:
+                xn, yn, tilt_jac = self._tilted_focus(a, d)
         dvec = p - a
         dist = dr.norm(dvec)
         cos_t = dvec.z / dist
@@ -352,6 +391,8 @@ class DistortedPinhole(mi.Sensor):
             dx, dy = self._psf_offset(u, v, s)
             u, v = u + dx, v + dy
         active &= (u >= 0) & (u <= w) & (v >= 0) & (v <= h)
+        if self._focus_n is not None:
+            jac = jac * tilt_jac
         importance = (self._fx * self._fx / self._n_pix) * jac / (cos_t * cos_t * cos_t)
         ds = dr.zeros(mi.DirectionSample3f)
         # An oversampled film (PSF 'fft' mode, set by render_sensor) gets scaled positions.
@@ -405,8 +446,37 @@ class DistortedPinhole(mi.Sensor):
         d["distortion_percent"] = self.distortion_percent
         d["near_clip_mm"], d["far_clip_mm"] = self.near_clip, self.far_clip
         d["newton_iterations"] = self.newton_iterations
+        d["focus_plane_normal_camera_mitsuba"] = None if self._focus_n is None else list(self._focus_n)
         d["psf"] = None if self.psf is None else self.psf.to_dict()
         return d
+
+
+def _focus_plane_local(normal_world, to_world, cam) -> tuple[float, float, float]:
+    """Unit normal of the plane of focus in Mitsuba's camera frame, oriented towards the camera,
+    after checking that the plane lies in front of the camera over the whole image."""
+    n = np.asarray(normal_world, dtype=float)
+    if not np.all(np.isfinite(n)) or np.linalg.norm(n) == 0:
+        raise ConfigError(f"distorted_pinhole: 'focus_plane_normal' must be a non-zero vector, got {normal_world!r}.")
+    n_loc = to_world[:3, :3].T @ (n / np.linalg.norm(n))
+    if n_loc[2] < 0:
+        n_loc = -n_loc
+    if n_loc[2] < 0.05:
+        raise ConfigError(
+            f"distorted_pinhole: the plane of focus (normal {np.round(n, 4).tolist()}) is within 3 degrees of "
+            f"containing the optical axis; it cannot be the plane of focus."
+        )
+    w, h = cam.resolution
+    cx, cy = cam.principal_point_px
+    for u in (0, w):
+        for v in (0, h):
+            lx, ly = -(u - cx) / cam.focal_px, -(v - cy) / cam.focal_px
+            den = n_loc[0] * lx + n_loc[1] * ly + n_loc[2]
+            if den <= 0:
+                raise ConfigError(
+                    f"distorted_pinhole: the tilted plane of focus passes behind the camera at image corner "
+                    f"({u}, {v}); reduce its tilt (focus_plane_normal {np.round(n, 4).tolist()})."
+                )
+    return tuple(float(x) for x in n_loc)
 
 
 def _read_psf_props(rd, f_number, focus, focal, pitch):
