@@ -21,6 +21,7 @@ lint: setup
 bench: setup
 	$(PY) bench/bench_cameras.py
 	$(PY) bench/bench_mie.py
+	$(PY) bench/bench_optics.py
 
 clean:
 	rm -rf out .pytest_cache

@@ -140,3 +140,29 @@ def test_cli_errors_are_one_line_and_exit_2(xml, tmp_path, capsys, argv, match):
 def test_render_scene_rejects_missing_scene(tmp_path):
     with pytest.raises(ConfigError, match="scene file .*nope.xml.* does not exist"):
         mitpiv.render_scene(tmp_path / "nope.xml", out_dir=tmp_path / "o")
+
+
+def test_cli_sensor_writes_integer_images(xml, tmp_path, capsys):
+    out = tmp_path / "r"
+    assert main(["render", str(xml), "--out", str(out), "--frames", "0", "-D", "resolution=16"]) == 0
+    exr = out / "camA_frame000.exr"
+    img, _ = read_exr(exr)
+    sens = tmp_path / "s"
+    assert main(["sensor", str(exr), "--out", str(sens), "--format", "exr", "--bit-depth", "8",
+                 "--peak-photons", "200"]) == 0
+    from mitpiv.io.counts import read_counts
+
+    counts, meta = read_counts(sens / "camA_frame000.exr")
+    expected = np.clip(np.rint(img.astype(np.float64) * 200 / img.max()), 0, 255)
+    assert np.array_equal(counts, expected) and meta["sensor_model"]["bit_depth"] == 8
+    assert meta["sensor_id"] == "camA"  # the render metadata travels along
+    assert main(["sensor", str(exr), "--out", str(sens), "--format", "png", "--bit-depth", "16", "--peak-photons", "1000",
+                 "--shot-noise", "--read-noise", "3"]) == 0
+    assert read_counts(sens / "camA_frame000.png")[0].dtype == np.uint16
+    # Bad input: one line, status 2, nothing written.
+    bad = tmp_path / "bad"
+    capsys.readouterr()
+    assert main(["sensor", str(exr), str(tmp_path / "missing.exr"), "--out", str(bad)]) == 2
+    assert main(["sensor", str(exr), "--out", str(bad), "--bit-depth", "9"]) == 2
+    assert "bit_depth" in capsys.readouterr().err
+    assert not bad.exists()
