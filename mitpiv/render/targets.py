@@ -14,9 +14,9 @@ import numpy as np
 
 from mitpiv.errors import ConfigError
 from mitpiv.physics.targets import CalibrationTarget, markers_world
-from mitpiv.render.render import render_sensor
+from mitpiv.render.render import render_sensor, sensor_model
 
-__all__ = ["target_scene", "render_target_views"]
+__all__ = ["target_scene", "render_target_views", "save_target_views"]
 
 
 def target_scene(sensors, target: CalibrationTarget, pose, *, radiance: float = 1.0, texel_mm: float | None = None):
@@ -63,3 +63,38 @@ def render_target_views(sensors, target: CalibrationTarget, poses, *, spp: int =
         if progress:
             print(f"[{k + 1}/{len(poses)}] target pose rendered through {len(images)} camera(s)", file=sys.stderr, flush=True)
     return out
+
+
+def save_target_views(views, out_dir, *, sensors, target: CalibrationTarget) -> list:
+    """Write views as ``target_pose{k:02d}_{sensor_id}.exr`` (camera model, target and pose in
+    the metadata) and ``target_truth.npz`` (``poses`` (n, 4, 4), ``markers_world`` (n, m, 3),
+    ``sensor_ids``); returns the paths. Files are written atomically; a bad view (shape or
+    non-finite pixels) is refused before anything is written.
+    """
+    from pathlib import Path
+
+    from mitpiv.io.atomic import atomic_path
+    from mitpiv.io.exr import write_exr
+
+    sensors = list(sensors)
+    ids = [s.id() or f"sensor{i}" for i, s in enumerate(sensors)]
+    for k, v in enumerate(views):
+        if len(v["images"]) != len(sensors):
+            raise ConfigError(f"save_target_views: view {k} has {len(v['images'])} images for {len(sensors)} sensors.")
+        for img in v["images"]:
+            if not np.all(np.isfinite(img)):
+                raise ConfigError(f"save_target_views: view {k} has non-finite pixels; nothing written.")
+    out = Path(out_dir)
+    paths = []
+    for k, v in enumerate(views):
+        for sid, s, img in zip(ids, sensors, v["images"], strict=True):
+            meta = {"kind": "calibration_target", "target": target.to_dict(), "pose": v["pose"].tolist(),
+                    "sensor_id": sid, "camera": sensor_model(s), "units": {"length": "mm"}}
+            paths.append(write_exr(out / f"target_pose{k:02d}_{sid}.exr", img, meta))
+    truth = out / "target_truth.npz"
+    with atomic_path(truth, suffix=".npz") as tmp:
+        with open(tmp, "wb") as f:
+            np.savez(f, poses=np.stack([v["pose"] for v in views]),
+                     markers_world=np.stack([v["markers_world"] for v in views]), sensor_ids=np.array(ids))
+    paths.append(truth)
+    return paths

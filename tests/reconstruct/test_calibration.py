@@ -11,9 +11,11 @@ import numpy as np
 import pytest
 
 from mitpiv.errors import CalibrationError, ConfigError
-from mitpiv.imaging import apply_sensor
+from mitpiv.imaging import apply_sensor, convolve_psf
+from mitpiv.io import read_exr
 from mitpiv.physics.camera import PinholeCamera, place_camera
 from mitpiv.physics.distortion import Distortion
+from mitpiv.physics.psf import psf
 from mitpiv.physics.targets import CalibrationTarget, markers_world, target_pose
 from mitpiv.reconstruct import (
     PinholeMapping,
@@ -26,7 +28,7 @@ from mitpiv.reconstruct import (
     plane_homographies,
 )
 from mitpiv.render.scene import load_dict
-from mitpiv.render.targets import render_target_views
+from mitpiv.render.targets import render_target_views, save_target_views
 
 RES = (256, 256)
 ROT, POS = place_camera(azimuth_deg=25, elevation_deg=45, distance_mm=400)
@@ -129,8 +131,10 @@ def test_checkerboard_views():
 def test_detection_is_robust_to_noise_and_blur(plain):
     s, views = plain
     v = views[0]
-    # 8-bit camera, 3 % Gaussian noise of the peak, and a PSF wider than the dot edges.
-    noisy = apply_sensor(v["images"][0], peak_photons=200.0, shot_noise=True, gaussian_noise_percent=3.0, bit_depth=8, seed=1)
+    # Diffraction blur (working f/22: Airy diameter 2.9 px, half the dot), then an 8-bit
+    # camera with shot noise and 3 % Gaussian noise of the peak.
+    blurred = convolve_psf(v["images"][0], psf(f_number=11.0, magnification=1.0, pixel_pitch_um=10.0))
+    noisy = apply_sensor(blurred, peak_photons=200.0, shot_noise=True, gaussian_noise_percent=3.0, bit_depth=8, seed=1)
     det = detect_dots(noisy.astype(float))
     i, j = label_markers(det, truth_of(s).project(v["markers_world"]))
     assert len(i) >= np.count_nonzero(visible(truth_of(s).project(v["markers_world"])))
@@ -201,3 +205,19 @@ def test_bad_calibration_input():
         detect_dots(np.random.default_rng(0).normal(10.0, 1.0, RES))
     with pytest.raises(ConfigError, match="dot_diameter_mm"):
         CalibrationTarget("dots", 5, 5, 1.0, dot_diameter_mm=1.5)
+
+
+def test_saved_views_carry_truth_and_camera(plain, tmp_path):
+    s, views = plain
+    paths = save_target_views(views[:2], tmp_path, sensors=[s], target=DOTS)
+    assert [p.name for p in paths] == ["target_pose00_sensor0.exr", "target_pose01_sensor0.exr", "target_truth.npz"]
+    img, meta = read_exr(paths[1])
+    np.testing.assert_array_equal(img, views[1]["images"][0])
+    assert meta["target"]["rows"] == 15 and np.allclose(meta["pose"], views[1]["pose"])
+    np.testing.assert_allclose(mapping_from_metadata(meta).project(VOLUME), truth_of(s).project(VOLUME), atol=1e-9)
+    with np.load(paths[2]) as z:
+        np.testing.assert_array_equal(z["markers_world"][1], views[1]["markers_world"])
+    bad = [{**views[0], "images": [np.full((4, 4), np.nan)]}]
+    with pytest.raises(ConfigError, match="non-finite"):
+        save_target_views(bad, tmp_path / "bad", sensors=[s], target=DOTS)
+    assert not (tmp_path / "bad").exists()
