@@ -81,7 +81,9 @@
        FFT convolution by :func:`mitpiv.render.render.render_sensor`; film filter
        ``catmullrom`` (best), ``lanczos`` or ``tent``) or
        ``jitter`` (ray offsets drawn from the PSF, may vary over the field; film filter
-       ``box``). See :class:`mitpiv.imaging.RenderPSF`.
+       ``box``). See :class:`mitpiv.imaging.RenderPSF`. ``fft`` happens after rendering:
+       ``mi.render`` alone returns the image without it; use ``render_sensor`` or
+       ``mitpiv.render_scene``.
    * - psf_f_number, psf_wavelength_nm, psf_magnification
      - float
      - --, nm, --
