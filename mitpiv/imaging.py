@@ -15,13 +15,14 @@ The sensor chain (each stage optional, applied in this order, vectorised, seeded
 
 ``exposure`` converts the renderer's pixel values to mean photon counts (photons per pixel
 per unit of image value); ``peak_photons`` is the alternative that scales the brightest
-pixel to that many photons. With ``bit_depth`` the result is an unsigned integer array
+pixel to that many photons; with neither, image values are taken as photons. With ``bit_depth`` the result is an unsigned integer array
 (uint8 for 8 bits, uint16 up to 16); without, float64 counts.
 """
 
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -70,7 +71,7 @@ class SensorModel:
     def __post_init__(self):
         def nonneg(name):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0):
+            if not (isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) and v >= 0):
                 raise ConfigError(f"sensor: parameter '{name}' must be a finite number >= 0, got {v!r}.")
 
         if self.exposure is not None and self.peak_photons is not None:
@@ -81,7 +82,7 @@ class SensorModel:
         for name in ("dark_current_e_per_s", "exposure_time_s", "read_noise_e", "black_level", "gaussian_noise_percent"):
             nonneg(name)
         qe = self.quantum_efficiency
-        if not (isinstance(qe, (int, float)) and 0 < qe <= 1):
+        if not (isinstance(qe, numbers.Real) and 0 < qe <= 1):
             raise ConfigError(f"sensor: parameter 'quantum_efficiency' must be in (0, 1], got {qe!r}.")
         check_positive("gain_e_per_count", self.gain_e_per_count, owner="sensor")
         if self.bit_depth is not None and self.bit_depth not in _BIT_DEPTHS:

@@ -333,7 +333,7 @@ def psf_details(
                 f"f/{nw:.3g}: {need_period}; wavefront slope {slope:.3g} waves per pupil radius: "
                 f"{need_phase}), above max_pupil_samples={max_pupil_samples}. Reduce the "
                 f"aberration coefficients, give a smaller 'size_px' or a larger 'energy_tolerance', "
-                f"or raise 'max_pupil_samples' if the memory allows (4 n^2 complex values)."
+                f"or raise 'max_pupil_samples' if the memory allows (about 220 n^2 bytes: 0.9 GB at 2048)."
             )
     else:
         if isinstance(pupil_samples, bool) or int(pupil_samples) != pupil_samples or pupil_samples < 8:
