@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import asdict, dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -237,8 +238,11 @@ class RenderPSF:
             raise ConfigError(f"psf: parameter 'psf_oversample' must be odd (pixel centres on fine-pixel centres), got {self.oversample}.")
         if self.field_levels < 2 and self.defocus_corner_waves != 0.0:
             raise ConfigError("psf: 'psf_field_levels' must be >= 2 with a field-dependent PSF.")
-        # Validate the optics once (raises ConfigError for bad values).
-        self.kernel_at(0.0, pitch_um=self.pixel_pitch_um)
+        # Build what the mode uses once (raises ConfigError for bad optics); cached for renders.
+        if self.mode == "fft":
+            _ = self.fft_kernel
+        elif self.mode == "jitter":
+            _ = self.jitter_tables
 
     def kernel_at(self, field_fraction_sq: float, *, pitch_um: float) -> np.ndarray:
         """Window-normalised PSF integrated over cells of ``pitch_um``, at field height^2 fraction."""
@@ -250,8 +254,13 @@ class RenderPSF:
                    defocus_waves=self.defocus_corner_waves * field_fraction_sq,
                    energy_tolerance=self.energy_tolerance, normalize="window")
 
+    @property
     def fft_kernel(self) -> np.ndarray:
-        """PSF integrated over a whole pixel, sampled every ``pixel / oversample``."""
+        """PSF integrated over a whole pixel, sampled every ``pixel / oversample`` (read-only;
+        shared by equal PSFs, e.g. every camera and frame of a scene)."""
+        return _fft_kernel(self)
+
+    def _build_fft_kernel(self) -> np.ndarray:
         from scipy.signal import fftconvolve
 
         s = self.oversample
@@ -264,11 +273,15 @@ class RenderPSF:
         img = np.asarray(fine_image, dtype=np.float64)
         if img.shape[0] % s or img.shape[1] % s:
             raise ConfigError(f"psf: the rendered image {img.shape} is not {s} times the camera resolution.")
-        out = convolve_psf(img, self.fft_kernel()) / (s * s)
+        out = convolve_psf(img, self.fft_kernel) / (s * s)
         return out[s // 2::s, s // 2::s]
 
+    @property
     def jitter_tables(self) -> tuple[np.ndarray, int, int]:
-        """(cell probabilities (levels, S, S), S, levels) for the jitter sampler."""
+        """(cell probabilities (levels, S, S), S, levels) for the jitter sampler (read-only, shared)."""
+        return _jitter_tables(self)
+
+    def _build_jitter_tables(self) -> tuple[np.ndarray, int, int]:
         levels = self.field_levels if self.defocus_corner_waves != 0.0 else 1
         q = self.pixel_pitch_um / self.table_oversample
         ks = [self.kernel_at(k / max(levels - 1, 1), pitch_um=q) for k in range(levels)]
@@ -284,3 +297,17 @@ class RenderPSF:
         d["zernike_coefficients"] = {f"noll{j}": c for j, c in self.zernike_coefficients}
         d["indexing"] = "noll"
         return d
+
+
+@lru_cache(maxsize=32)
+def _fft_kernel(psf: RenderPSF) -> np.ndarray:
+    k = psf._build_fft_kernel()
+    k.setflags(write=False)
+    return k
+
+
+@lru_cache(maxsize=32)
+def _jitter_tables(psf: RenderPSF) -> tuple[np.ndarray, int, int]:
+    tables, size, levels = psf._build_jitter_tables()
+    tables.setflags(write=False)
+    return tables, size, levels

@@ -327,10 +327,10 @@ def ring_arrangement(
         az = azimuth_start_deg + 360.0 * np.arange(n) / n
     else:
         az = azimuth_start_deg + (np.linspace(0.0, azimuth_span_deg, n) if n > 1 else np.zeros(1))
-    return scatter_list(az, np.full(n, float(elevation_deg)), distance_mm, target_mm, laser_direction, sheet_normal)
+    return _scatter_list(az, np.full(n, float(elevation_deg)), distance_mm, target_mm, laser_direction, sheet_normal)
 
 
-def scatter_list(az, el, distance_mm, target_mm, laser_direction, sheet_normal) -> list[dict]:
+def _scatter_list(az, el, distance_mm, target_mm, laser_direction, sheet_normal) -> list[dict]:
     e1 = np.asarray(laser_direction, dtype=float)
     e1 = e1 / np.linalg.norm(e1)
     out = []
@@ -372,7 +372,7 @@ def scatter_arrangement(
         az, el = ([a, 180 - a], [e, e]) if n == 2 else ([a, -a, 180 - a, -(180 - a)], [e, e, e, e])
     else:
         raise ConfigError(f"scatter_arrangement: 'kind' must be 'forward', 'backward' or 'symmetric', got {kind!r}.")
-    return scatter_list(np.array(az), np.array(el), distance_mm, target_mm, laser_direction, sheet_normal)
+    return _scatter_list(np.array(az), np.array(el), distance_mm, target_mm, laser_direction, sheet_normal)
 
 
 def planar_array(

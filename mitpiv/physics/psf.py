@@ -422,13 +422,7 @@ def psf(
     -------
     (size_px, size_px) float64 array indexed [row (y), column (x)].
     """
-    return psf_details(
-        f_number=f_number, pixel_pitch_um=pixel_pitch_um, wavelength_nm=wavelength_nm,
-        magnification=magnification, zernike_coefficients=zernike_coefficients,
-        defocus_waves=defocus_waves, spherical_waves=spherical_waves, indexing=indexing,
-        size_px=size_px, offset_px=offset_px, energy_tolerance=energy_tolerance,
-        pupil_samples=pupil_samples, normalize=normalize,
-    ).image
+    return psf_details(**locals()).image
 
 
 def ring_energies(image: np.ndarray, *, rings: int = 2) -> list[float]:

@@ -163,12 +163,6 @@ def _check_points(pixels, world, resolution):
     return px, w
 
 
-def _rank_report(w) -> tuple[np.ndarray, float]:
-    c = w - w.mean(axis=0)
-    s = np.linalg.svd(c, compute_uv=False)
-    return s, float(s[0]) if s.size else 0.0
-
-
 def _dlt(px, w):
     """Normalised direct linear transform: 3x4 P with x ~ P X."""
     def norm(a):
@@ -233,14 +227,13 @@ def calibrate(
     CameraMapping with ``fit_report`` = {"rms_px", "max_px", "markers", "model", ...}.
     """
     px, w = _check_points(pixels, world_mm, resolution)
-    s, s0 = _rank_report(w)
     if model == "polynomial":
         need = 2 * len(SOLOFF_TERMS)
         if len(px) < need:
             raise CalibrationError(f"calibrate: the polynomial mapping needs at least {need} markers, got {len(px)}.")
         depths = np.unique(np.round(w[:, 2], 6))
-        a = PolynomialMapping.design((w - 0.5 * (w.max(0) + w.min(0))) / np.where(np.ptp(w, 0) > 0, 0.5 * np.ptp(w, 0), 1.0))
-        sv = np.linalg.svd(a, compute_uv=False)
+        centre, scale = PolynomialMapping.normalisation(w)
+        sv = np.linalg.svd(PolynomialMapping.design((w - centre) / scale), compute_uv=False)
         if len(depths) < 3 or sv[-1] < 1e-8 * sv[0]:
             raise CalibrationError(
                 f"calibrate: the markers do not determine the polynomial mapping (quadratic in z needs "
@@ -250,7 +243,7 @@ def calibrate(
         mapping = PolynomialMapping.fit(px, w, resolution=resolution)
         info = {"model": "polynomial", "terms": len(SOLOFF_TERMS), "depths": len(depths)}
     elif model == "pinhole":
-        mapping, info = _fit_pinhole(px, w, s, s0, resolution, distortion, pixel_pitch_um)
+        mapping, info = _fit_pinhole(px, w, resolution, distortion, pixel_pitch_um)
     else:
         raise ConfigError(f"calibrate: parameter 'model' must be 'pinhole' or 'polynomial', got {model!r}.")
     r = mapping.residuals(px, w)
@@ -266,7 +259,7 @@ def calibrate(
     return mapping
 
 
-def _fit_pinhole(px, w, s, s0, resolution, distortion, pitch):
+def _fit_pinhole(px, w, resolution, distortion, pitch):
     import cv2
 
     if resolution is None:
@@ -279,6 +272,8 @@ def _fit_pinhole(px, w, s, s0, resolution, distortion, pitch):
             f"calibrate: a pinhole fit with distortion '{distortion}' ({n_par} parameters) needs at least "
             f"{max(2 * n_par, 12)} markers, got {len(px)}."
         )
+    s = np.linalg.svd(w - w.mean(axis=0), compute_uv=False)  # spread of the markers per principal axis
+    s0 = float(s[0])
     if s0 == 0 or s[1] < 1e-6 * s0:
         raise CalibrationError("calibrate: the markers are collinear (or coincide); a camera cannot be fitted.")
     if s[2] < 1e-3 * s0:
@@ -297,12 +292,12 @@ def _fit_pinhole(px, w, s, s0, resolution, distortion, pitch):
     rvec0, _ = cv2.Rodrigues(r)
     obj = [w.astype(np.float32)]
     img = [(px - 0.5).astype(np.float32).reshape(-1, 1, 2)]
+    flags |= getattr(cv2, "CALIB_USE_EXTRINSIC_GUESS", 0)  # start from the DLT pose where OpenCV allows it
     crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 500, 1e-15)
     try:
         _, kk, dist, rvecs, tvecs = cv2.calibrateCamera(
             obj, img, tuple(int(v) for v in resolution), k0, np.zeros(5), [rvec0], [t.reshape(3, 1)],
-            flags=flags | cv2.CALIB_USE_EXTRINSIC_GUESS if hasattr(cv2, "CALIB_USE_EXTRINSIC_GUESS") else flags,
-            criteria=crit)
+            flags=flags, criteria=crit)
     except cv2.error as e:
         raise CalibrationError(f"calibrate: OpenCV's calibrateCamera failed: {str(e).strip().splitlines()[-1]}") from None
     rot, _ = cv2.Rodrigues(rvecs[0])
@@ -320,7 +315,7 @@ def _fit_pinhole(px, w, s, s0, resolution, distortion, pitch):
 def _dlt_start(px, w):
     p = _dlt(px, w)
     k, r, t = _decompose(p)
-    # The DLT may put the camera behind the points; flip to the solution in front.
+    # _decompose fixes det(M) > 0; markers still behind the camera mean wrong labels.
     if np.mean((w @ r.T + t)[:, 2]) < 0:
         raise CalibrationError("calibrate: the linear start puts the markers behind the camera; check the labels.")
     return k, r, t

@@ -13,6 +13,8 @@ Every mapping has ``project(p_world) -> (..., 2)`` pixels (mitpiv convention: pi
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+
 import numpy as np
 
 from mitpiv.errors import ConfigError
@@ -25,16 +27,18 @@ __all__ = ["CameraMapping", "PinholeMapping", "PolynomialMapping", "mapping_from
 SOLOFF_TERMS = tuple((i, j, k) for k in range(3) for n in range(4 - k) for i in range(n, -1, -1) for j in [n - i])
 
 
-class CameraMapping:
-    """Base class: subclasses implement ``project`` and ``jacobian``."""
+class CameraMapping(ABC):
+    """Abstract base: subclasses implement ``project`` and ``jacobian``."""
 
     resolution: tuple[int, int] | None = None
 
+    @abstractmethod
     def project(self, p_world) -> np.ndarray:
-        raise NotImplementedError
+        """World points (..., 3) [mm] -> pixels (..., 2)."""
 
+    @abstractmethod
     def jacobian(self, p_world) -> np.ndarray:
-        raise NotImplementedError
+        """d(pixel)/d(world), (..., 2, 3) [px/mm]."""
 
     def residuals(self, pixels, p_world) -> np.ndarray:
         """Reprojection error vectors [px]: project(world) - pixels."""
@@ -101,16 +105,22 @@ class PolynomialMapping(CameraMapping):
         """Monomials of normalised coordinates q (..., 3) -> (..., 19)."""
         return np.stack([q[..., 0] ** i * q[..., 1] ** j * q[..., 2] ** k for i, j, k in SOLOFF_TERMS], axis=-1)
 
+    @staticmethod
+    def normalisation(p_world) -> tuple[np.ndarray, np.ndarray]:
+        """(centre, half-range) of the points per axis (half-range 1 where they do not spread)."""
+        w = np.asarray(p_world, dtype=float).reshape(-1, 3)
+        centre = 0.5 * (w.max(axis=0) + w.min(axis=0))
+        scale = 0.5 * (w.max(axis=0) - w.min(axis=0))
+        scale[scale == 0] = 1.0
+        return centre, scale
+
     @classmethod
     def fit(cls, pixels, p_world, *, resolution=None) -> PolynomialMapping:
         """Least-squares fit (the caller checks the marker set; see :func:`calibrate`)."""
         w = np.asarray(p_world, dtype=float).reshape(-1, 3)
         px = np.asarray(pixels, dtype=float).reshape(-1, 2)
-        centre = 0.5 * (w.max(axis=0) + w.min(axis=0))
-        scale = 0.5 * (w.max(axis=0) - w.min(axis=0))
-        scale[scale == 0] = 1.0
-        a = cls.design((w - centre) / scale)
-        coef, *_ = np.linalg.lstsq(a, px, rcond=None)
+        centre, scale = cls.normalisation(w)
+        coef, *_ = np.linalg.lstsq(cls.design((w - centre) / scale), px, rcond=None)
         return cls(coef.T, centre, scale, resolution)
 
     def project(self, p_world) -> np.ndarray:

@@ -46,26 +46,25 @@ def render_sensor(scene, sensor, *, spp: int = 0, seed: int = 0) -> np.ndarray:
     finer (the film is restored afterwards) and convolved with its PSF
     (:meth:`mitpiv.imaging.RenderPSF.apply`); ``psf="jitter"`` happens inside the sensor.
     """
+    def render(dtype):
+        img = mi.render(scene, sensor=sensor, spp=spp, seed=seed)
+        dr.eval(img)
+        arr = np.array(img, dtype=dtype)
+        return arr[:, :, 0] if arr.ndim == 3 else arr
+
     psf = getattr(sensor, "psf", None)
-    if psf is not None and psf.mode == "fft":
-        film = sensor.film()
-        params = mi.traverse(film)
-        size = mi.ScalarVector2u(film.size())
-        params["size"] = mi.ScalarVector2u(size[0] * psf.oversample, size[1] * psf.oversample)
+    if psf is None or psf.mode != "fft":
+        return render(np.float32)
+    params = mi.traverse(sensor.film())
+    size = mi.ScalarVector2u(sensor.film().size())
+    params["size"] = mi.ScalarVector2u(size[0] * psf.oversample, size[1] * psf.oversample)
+    params.update()
+    try:
+        fine = render(np.float64)
+    finally:
+        params["size"] = size
         params.update()
-        try:
-            img = mi.render(scene, sensor=sensor, spp=spp, seed=seed)
-            dr.eval(img)
-            fine = np.array(img, dtype=np.float64)
-        finally:
-            params["size"] = size
-            params.update()
-        arr = psf.apply(fine[:, :, 0] if fine.ndim == 3 else fine)
-        return arr.astype(np.float32)
-    img = mi.render(scene, sensor=sensor, spp=spp, seed=seed)
-    dr.eval(img)
-    arr = np.array(img, dtype=np.float32)
-    return arr[:, :, 0] if arr.ndim == 3 else arr
+    return psf.apply(fine).astype(np.float32)
 
 
 def _integrator_info(scene) -> dict:

@@ -256,7 +256,7 @@ class DistortedPinhole(mi.Sensor):
         return "none" if self.psf is None else self.psf.mode
 
     def _build_psf_sampler(self, cam):
-        tables, size, levels = self.psf.jitter_tables()
+        tables, size, levels = self.psf.jitter_tables
         cdf = np.cumsum(tables.reshape(levels, -1), axis=1)
         cdf /= cdf[:, -1:]
         cdf += np.arange(levels)[:, None]
