@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 import sys
 
-PLUGINS = ("laser_sheet", "mie_phase", "tracer_particles", "distorted_pinhole", "particle_tracer")
+PLUGINS = ("laser_sheet", "mie_phase", "tracer_particles", "distorted_pinhole", "plenoptic", "particle_tracer")
 
 
 def register_all() -> None:

@@ -64,3 +64,32 @@ class PropertyReader:
                 f"{self.owner}: unknown parameter(s) {', '.join(repr(k) for k in sorted(left))}. "
                 f"See the plugin's parameter table (help(mitpiv.render.plugins.{self.owner}))."
             )
+
+
+def read_placement(rd: PropertyReader, props: mi.Properties):
+    """Camera pose from ``target``/``azimuth_deg``/``elevation_deg``/``distance_mm`` (see
+    :func:`mitpiv.physics.camera.place_camera`) as a 4x4 Mitsuba to_world matrix, or None
+    when the placement properties are absent (the sensor uses ``to_world``)."""
+    import numpy as np
+
+    from mitpiv.physics.camera import _CV_TO_MI, place_camera
+
+    placement = [rd.has(k) for k in ("azimuth_deg", "elevation_deg", "distance_mm")]
+    if not any(placement):
+        return None
+    if not all(placement):
+        raise ConfigError(f"{rd.owner}: placement needs all of 'azimuth_deg', 'elevation_deg', 'distance_mm'.")
+    if "to_world" in props:
+        raise ConfigError(f"{rd.owner}: give 'to_world' or azimuth/elevation placement, not both.")
+    rot, pos = place_camera(
+        target_mm=rd.vector("target", (0.0, 0.0, 0.0)),
+        azimuth_deg=rd.float("azimuth_deg"),
+        elevation_deg=rd.float("elevation_deg"),
+        distance_mm=rd.float("distance_mm"),
+        laser_direction=rd.vector("laser_direction", (1.0, 0.0, 0.0)),
+        sheet_normal=rd.vector("sheet_normal", (0.0, 0.0, 1.0)),
+    )
+    m = np.eye(4)
+    m[:3, :3] = rot.T @ _CV_TO_MI
+    m[:3, 3] = pos
+    return m

@@ -141,9 +141,9 @@ import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
 from mitpiv.imaging import RenderPSF
-from mitpiv.physics.camera import PinholeCamera, place_camera
+from mitpiv.physics.camera import PinholeCamera
 from mitpiv.physics.distortion import Distortion, distort_jacobian, percent_to_k1, undistort
-from mitpiv.render.plugins._props import PropertyReader
+from mitpiv.render.plugins._props import PropertyReader, read_placement
 
 _VARIANT = mi.variant()
 
@@ -174,22 +174,9 @@ class DistortedPinhole(mi.Sensor):
         cy = rd.float("principal_point_y_px", h / 2.0)
 
         # Pose: to_world (read by the Mitsuba base class) or placement around a target.
-        placement = [rd.has(k) for k in ("azimuth_deg", "elevation_deg", "distance_mm")]
-        if any(placement):
-            if not all(placement):
-                raise ConfigError("distorted_pinhole: placement needs all of 'azimuth_deg', 'elevation_deg', 'distance_mm'.")
-            if "to_world" in props:
-                raise ConfigError("distorted_pinhole: give 'to_world' or azimuth/elevation placement, not both.")
-            rot, pos = place_camera(
-                target_mm=rd.vector("target", (0.0, 0.0, 0.0)),
-                azimuth_deg=rd.float("azimuth_deg"),
-                elevation_deg=rd.float("elevation_deg"),
-                distance_mm=rd.float("distance_mm"),
-                laser_direction=rd.vector("laser_direction", (1.0, 0.0, 0.0)),
-                sheet_normal=rd.vector("sheet_normal", (0.0, 0.0, 1.0)),
-            )
-            tmp = PinholeCamera((w, h), focal, pitch, rotation=rot, position_mm=pos)
-            self.m_to_world = mi.Transform4f(tmp.to_world_mitsuba())
+        placed = read_placement(rd, props)
+        if placed is not None:
+            self.m_to_world = mi.Transform4f(placed)
         to_world = np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4)
         rotation, position = PinholeCamera.rotation_from_mitsuba(to_world)
 

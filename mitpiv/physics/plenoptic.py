@@ -1,0 +1,498 @@
+"""Plenoptic 1.0 (unfocused light-field) camera geometry in float64 NumPy.
+
+A thin main lens (focal length ``f``, aperture diameter ``D``) is focused on an object
+plane at distance ``s_o``; the microlens array (MLA) sits at the image distance
+``s_i = 1 / (1/f - 1/s_o)``; each lenslet (pitch ``p``, focal length ``f_m``) is focused
+at infinity, so the pixels ``g = f_m`` behind it record an image of the main-lens
+aperture. Nothing is paraxial in the plugin: the ideal thin lens is exactly linear in the
+ray *tangents* ``t = (dx/dz, dy/dz)`` (``t_out = t_in - (x - c) / f``, the refraction of
+Mitsuba's ``thinlens``), so the ray-transfer bookkeeping here is exact for every ray.
+
+Frames
+------
+Camera-local frame = Mitsuba's (x left, y up, z forward along the optical axis), main
+lens at ``z = 0``, MLA plane at ``z = -s_i``, sensor at ``z = -(s_i + g)``. The
+*sensor frame* ``(X, Y)`` [mm] is that local (x, y) on the MLA and sensor planes; the
+image is read out rotated by 180 degrees, so pixel ``(u, v)`` (continuous, pixel
+``(i, j)`` spans ``[i, i+1)``) sits at ``X = (u - W/2) p_px``, ``Y = (v - H/2) p_px``
+and the raw image shows the scene upright. Lenslet centres are given in that frame:
+``rect`` layout = square lattice; ``hex`` = rows spaced ``p sqrt(3)/2`` with odd rows
+shifted by ``p/2``; the whole array may be rotated and offset (misalignment).
+
+The lenslet images are centred on ``C_k = c_k (1 + g/s_i)``, the projection of the
+lenslet centre from the main-lens centre, not on the lenslet centres themselves; a pixel
+at ``C_k + u`` looks through lenslet ``k`` at the main-lens aperture point
+``a = -u s_i / g`` (the basis of :mod:`mitpiv.lightfield`).
+
+Design calculators (depth of field, depth resolution, pixel bookkeeping) follow the
+geometric construction of Deem et al. (2016, Meas. Sci. Technol. 27 084003): a point is
+in focus in a refocused image while its blur spot on the MLA plane stays within one
+lenslet, and in a perspective (sub-aperture) view while the blur through one angular
+sample of the aperture (``D / n_u``) stays within one lenslet.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mitpiv.errors import ConfigError, check_positive
+
+__all__ = ["PlenopticCamera", "PRESETS", "preset", "thin_lens_image_distance"]
+
+_OWNER = "plenoptic"
+
+#: Reference cameras. Lytro-like: the camera of multi-plenoptic PIV studies (main lens
+#: 10 mm f/2, 14 um lenslets f/2, 328x328 lenslets, 1.4 um pixels). LF-PIV: hexagonal
+#: MLA on 5.5 um pixels (the 6600x4400 sensor of in-house LF-PIV cameras), 50 mm f/2.8 main
+#: lens, lenslet f-number matched to the image-side f-number, PMR 7, 14 or 28.
+PRESETS: dict[str, dict] = {
+    "lytro_like": dict(resolution=(3280, 3280), pixel_pitch_um=1.4, focal_length_mm=10.0, f_number=2.0,
+                       focus_distance_mm=100.0, mla_pitch_um=14.0, mla_focal_length_um=28.0, mla_layout="rect",
+                       mla_count=(328, 328)),
+}
+for _n in (800, 1600):
+    for _pmr in (7, 14, 28):
+        PRESETS[f"lfpiv_hex_{_n}_pmr{_pmr}"] = dict(
+            resolution=(_n, _n), pixel_pitch_um=5.5, focal_length_mm=50.0, f_number=2.8, focus_distance_mm=250.0,
+            mla_pitch_um=5.5 * _pmr, mla_focal_length_um=None, mla_layout="hex", mla_count=None)
+
+
+def preset(name: str, **overrides) -> PlenopticCamera:
+    """A :class:`PlenopticCamera` from :data:`PRESETS`, with any field overridden."""
+    if name not in PRESETS:
+        raise ConfigError(f"plenoptic: unknown preset {name!r}; choose one of {sorted(PRESETS)}.")
+    return PlenopticCamera(**{**PRESETS[name], **overrides})
+
+
+def thin_lens_image_distance(focal_length_mm: float, object_distance_mm):
+    """Image distance ``1 / (1/f - 1/s_o)`` [mm] (``s_o > f``)."""
+    so = np.asarray(object_distance_mm, dtype=float)
+    return focal_length_mm * so / (so - focal_length_mm)
+
+
+@dataclass
+class PlenopticCamera:
+    """Geometry of a plenoptic 1.0 camera; see the module docstring for the frames.
+
+    Parameters
+    ----------
+    resolution : (int, int)
+        Sensor width and height [px].
+    pixel_pitch_um : float
+    focal_length_mm : float
+        Main-lens focal length.
+    f_number : float, optional
+        Main-lens f-number ``f / D`` (or give ``aperture_diameter_mm``).
+    aperture_diameter_mm : float, optional
+    focus_distance_mm : float
+        Object distance in focus on the MLA (from the lens), ``> focal_length_mm``.
+    mla_pitch_um : float
+        Lenslet pitch (centre spacing along a row).
+    mla_focal_length_um : float, optional
+        Default: f-number matched, ``p * s_i / D``.
+    mla_layout : "rect" | "hex"
+    mla_count : (int, int), optional
+        Lenslets per row and rows; default: as many as fit on the sensor.
+    mla_rotation_deg : float
+        Rotation of the array relative to the pixel grid (|angle| <= 30 deg).
+    mla_offset_um : (float, float)
+        Shift of the array centre from the sensor centre (sensor frame).
+    mla_gap_um : float, optional
+        MLA-to-sensor distance; default the lenslet focal length.
+    to_world_mitsuba : (4, 4) array
+        Camera pose (Mitsuba convention), main-lens centre at the translation.
+    """
+
+    resolution: tuple[int, int]
+    pixel_pitch_um: float
+    focal_length_mm: float
+    focus_distance_mm: float
+    mla_pitch_um: float
+    f_number: float | None = None
+    aperture_diameter_mm: float | None = None
+    mla_focal_length_um: float | None = None
+    mla_layout: str = "rect"
+    mla_count: tuple[int, int] | None = None
+    mla_rotation_deg: float = 0.0
+    mla_offset_um: tuple[float, float] = (0.0, 0.0)
+    mla_gap_um: float | None = None
+    to_world_mitsuba: np.ndarray = field(default_factory=lambda: np.eye(4))
+
+    def __post_init__(self) -> None:
+        w, h = (int(v) for v in self.resolution)
+        if w != self.resolution[0] or h != self.resolution[1] or w < 2 or h < 2:
+            raise ConfigError(f"{_OWNER}: 'resolution' must be two integers >= 2, got {self.resolution!r}.")
+        self.resolution = (w, h)
+        for name, unit in (("pixel_pitch_um", "um"), ("focal_length_mm", "mm"), ("focus_distance_mm", "mm"),
+                           ("mla_pitch_um", "um")):
+            setattr(self, name, check_positive(name, getattr(self, name), owner=_OWNER, unit=unit))
+        if (self.f_number is None) == (self.aperture_diameter_mm is None):
+            raise ConfigError(f"{_OWNER}: give exactly one of 'f_number' and 'aperture_diameter_mm'.")
+        if self.f_number is not None:
+            self.f_number = check_positive("f_number", self.f_number, owner=_OWNER)
+            self.aperture_diameter_mm = self.focal_length_mm / self.f_number
+        else:
+            self.aperture_diameter_mm = check_positive("aperture_diameter_mm", self.aperture_diameter_mm, owner=_OWNER, unit="mm")
+            self.f_number = self.focal_length_mm / self.aperture_diameter_mm
+        if self.focus_distance_mm <= self.focal_length_mm * 1.0001:
+            raise ConfigError(
+                f"{_OWNER}: 'focus_distance_mm' ({self.focus_distance_mm}) must exceed the focal length "
+                f"({self.focal_length_mm} mm): a closer object has no real image on the MLA."
+            )
+        if self.mla_layout not in ("rect", "hex"):
+            raise ConfigError(f"{_OWNER}: 'mla_layout' must be 'rect' or 'hex', got {self.mla_layout!r}.")
+        if self.mla_focal_length_um is None:
+            self.mla_focal_length_um = self.mla_pitch_um * self.image_f_number
+        self.mla_focal_length_um = check_positive("mla_focal_length_um", self.mla_focal_length_um, owner=_OWNER, unit="um")
+        if self.mla_gap_um is None:
+            self.mla_gap_um = self.mla_focal_length_um
+        self.mla_gap_um = check_positive("mla_gap_um", self.mla_gap_um, owner=_OWNER, unit="um")
+        if not abs(self.mla_rotation_deg) <= 30.0:
+            raise ConfigError(f"{_OWNER}: 'mla_rotation_deg' must lie in [-30, 30] deg (a misalignment), got {self.mla_rotation_deg!r}.")
+        self.mla_offset_um = (float(self.mla_offset_um[0]), float(self.mla_offset_um[1]))
+        if self.pmr < 2.0:
+            raise ConfigError(
+                f"{_OWNER}: the lenslet pitch ({self.mla_pitch_um} um) covers {self.pmr:.3g} pixels of "
+                f"{self.pixel_pitch_um} um; a light field needs at least 2 pixels per lenslet. Increase 'mla_pitch_um'."
+            )
+        sw, sh = w * self.pixel_pitch_um, h * self.pixel_pitch_um
+        if self.mla_pitch_um > min(sw, sh):
+            raise ConfigError(
+                f"{_OWNER}: the lenslet pitch ({self.mla_pitch_um} um) is larger than the sensor "
+                f"({sw:.1f} x {sh:.1f} um). Reduce 'mla_pitch_um' or enlarge the sensor."
+            )
+        if self.mla_count is None:
+            nx = int(math.floor((sw - (self.mla_pitch_um / 2 if self.mla_layout == "hex" else 0.0)) / self.mla_pitch_um + 1e-9))
+            ny = int(math.floor(sh / self.row_pitch_um + 1e-9))
+            self.mla_count = (max(nx, 1), max(ny, 1))
+        nx, ny = (int(v) for v in self.mla_count)
+        if nx < 1 or ny < 1 or (nx, ny) != tuple(self.mla_count):
+            raise ConfigError(f"{_OWNER}: 'mla_count' must be two positive integers, got {self.mla_count!r}.")
+        self.mla_count = (nx, ny)
+        width = (nx + (0.5 if self.mla_layout == "hex" and ny > 1 else 0.0)) * self.mla_pitch_um
+        if width > 1.5 * sw or ny * self.row_pitch_um > 1.5 * sh:
+            raise ConfigError(
+                f"{_OWNER}: {nx}x{ny} lenslets of {self.mla_pitch_um} um span {width:.0f} x "
+                f"{ny * self.row_pitch_um:.0f} um, far larger than the sensor ({sw:.0f} x {sh:.0f} um). "
+                f"Reduce 'mla_count' (or leave it out to fill the sensor)."
+            )
+        self.to_world_mitsuba = np.asarray(self.to_world_mitsuba, dtype=float).reshape(4, 4)
+        offs = self.crosstalk_offsets()  # raises for mismatches beyond the model
+        self._n_crosstalk = len(offs)
+
+    # ------------------------------------------------------------------ main lens
+    @property
+    def image_distance_mm(self) -> float:
+        """MLA distance behind the main lens, ``s_i``."""
+        return float(thin_lens_image_distance(self.focal_length_mm, self.focus_distance_mm))
+
+    @property
+    def magnification(self) -> float:
+        """Lateral magnification ``|M| = s_i / s_o`` of the focal plane onto the MLA."""
+        return self.image_distance_mm / self.focus_distance_mm
+
+    @property
+    def aperture_radius_mm(self) -> float:
+        return 0.5 * self.aperture_diameter_mm
+
+    @property
+    def image_f_number(self) -> float:
+        """Image-side (working) f-number ``s_i / D = N (1 + |M|)``."""
+        return self.image_distance_mm / self.aperture_diameter_mm
+
+    # ------------------------------------------------------------------ MLA lattice
+    @property
+    def mla_f_number(self) -> float:
+        return self.mla_focal_length_um / self.mla_pitch_um
+
+    @property
+    def pmr(self) -> float:
+        """Pixels per lenslet pitch (may be non-integer)."""
+        return self.mla_pitch_um / self.pixel_pitch_um
+
+    @property
+    def row_pitch_um(self) -> float:
+        return self.mla_pitch_um * (math.sqrt(3.0) / 2.0 if self.mla_layout == "hex" else 1.0)
+
+    @property
+    def gap_mm(self) -> float:
+        return self.mla_gap_um * 1e-3
+
+    @property
+    def image_scale(self) -> float:
+        """``1 + g/s_i``: lenslet-image centres are the lenslet centres scaled by this about the axis."""
+        return 1.0 + self.gap_mm / self.image_distance_mm
+
+    @property
+    def basis_mm(self) -> np.ndarray:
+        """Lattice basis (2, 2) [mm], rows ``a1`` (along a lenslet row) and ``a2`` (next row)."""
+        p = self.mla_pitch_um * 1e-3
+        a1 = np.array([p, 0.0])
+        a2 = np.array([0.5 * p, p * math.sqrt(3.0) / 2.0]) if self.mla_layout == "hex" else np.array([0.0, p])
+        th = math.radians(self.mla_rotation_deg)
+        rot = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+        return np.stack([rot @ a1, rot @ a2])
+
+    @property
+    def origin_mm(self) -> np.ndarray:
+        """Centre of lenslet (column 0, row 0) in the sensor frame [mm]."""
+        nx, ny = self.mla_count
+        p = self.mla_pitch_um * 1e-3
+        x0 = -0.5 * (nx - 1) * p - (0.25 * p if self.mla_layout == "hex" and ny > 1 else 0.0)
+        y0 = -0.5 * (ny - 1) * self.row_pitch_um * 1e-3
+        th = math.radians(self.mla_rotation_deg)
+        rot = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+        return rot @ np.array([x0, y0]) + np.asarray(self.mla_offset_um) * 1e-3
+
+    def storage_to_axial(self, col, row):
+        """Lenslet (column, row) -> lattice coordinates (i, j) along the basis."""
+        col, row = np.asarray(col), np.asarray(row)
+        if self.mla_layout == "hex":
+            return col - row // 2, row  # x = col p + (row % 2) p/2 = (col - row//2) p + row p/2
+        return col, row
+
+    def axial_to_storage(self, i, j):
+        i, j = np.asarray(i), np.asarray(j)
+        if self.mla_layout == "hex":
+            return i + j // 2, j
+        return i, j
+
+    def lenslet_centres_mm(self) -> np.ndarray:
+        """(ny, nx, 2) lenslet centres in the sensor frame [mm] (storage order row, column)."""
+        nx, ny = self.mla_count
+        row, col = np.mgrid[0:ny, 0:nx]
+        i, j = self.storage_to_axial(col, row)
+        b = self.basis_mm
+        return self.origin_mm + i[..., None] * b[0] + j[..., None] * b[1]
+
+    def image_centres_px(self) -> np.ndarray:
+        """(ny, nx, 2) lenslet-image centres in pixel coordinates ``(u, v)``."""
+        return self.sensor_mm_to_px(self.lenslet_centres_mm() * self.image_scale)
+
+    def sensor_mm_to_px(self, xy_mm) -> np.ndarray:
+        xy = np.asarray(xy_mm, dtype=float)
+        w, h = self.resolution
+        return xy / (self.pixel_pitch_um * 1e-3) + np.array([w / 2.0, h / 2.0])
+
+    def px_to_sensor_mm(self, uv_px) -> np.ndarray:
+        uv = np.asarray(uv_px, dtype=float)
+        w, h = self.resolution
+        return (uv - np.array([w / 2.0, h / 2.0])) * (self.pixel_pitch_um * 1e-3)
+
+    @property
+    def cell_area_mm2(self) -> float:
+        return abs(float(np.linalg.det(self.basis_mm)))
+
+    @property
+    def cell_circumradius_mm(self) -> float:
+        p = self.mla_pitch_um * 1e-3
+        return p / math.sqrt(2.0) if self.mla_layout == "rect" else p / math.sqrt(3.0)
+
+    def _cell_polygon(self) -> np.ndarray:
+        """Vertices of the Voronoi cell of a lenslet (relative to its centre) [mm]."""
+        b = self.basis_mm
+        if self.mla_layout == "rect":
+            return np.array([0.5 * (sx * b[0] + sy * b[1]) for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1))])
+        # Hexagon: circumcentres of the 6 triangles around the origin.
+        nbrs = [b[0], b[1], b[1] - b[0], -b[0], -b[1], b[0] - b[1]]
+        return np.array([(nbrs[k] + nbrs[(k + 1) % 6]) / 3.0 for k in range(6)])
+
+    @property
+    def image_region_radius_mm(self) -> float:
+        """Radius of a disk around a lenslet-image centre that holds every sensor point the
+        lenslet can light: ``|1 + g/s_i - g/f_m| r_cell + (g/s_i) D/2`` (exact bound for the
+        tangent-linear thin lenses)."""
+        si, g, fm = self.image_distance_mm, self.gap_mm, self.mla_focal_length_um * 1e-3
+        return abs(1.0 + g / si - g / fm) * self.cell_circumradius_mm + (g / si) * self.aperture_radius_mm
+
+    def crosstalk_offsets(self) -> list[tuple[int, int]]:
+        """Lattice offsets (di, dj) of the lenslets whose light can reach the pixels that lie
+        closest to a given lenslet's image, (0, 0) first.
+
+        The image region of a lenslet is bounded by a disk of radius
+        ``|1 + g/s_i - g/f_m| r_cell + (g/s_i) D/2`` around its image centre (exact for the
+        tangent-linear thin lenses). More than two rings of neighbours is an f-number
+        mismatch beyond the model: raises :class:`ConfigError`.
+        """
+        rho = self.image_region_radius_mm
+        s = self.image_scale
+        b = self.basis_mm * s
+        poly = self._cell_polygon() * s
+        out = [(0, 0)]
+        rings = 0
+        for di in range(-4, 5):
+            for dj in range(-4, 5):
+                if (di, dj) == (0, 0):
+                    continue
+                c = di * b[0] + dj * b[1]
+                if _point_polygon_distance(c, poly) < rho:
+                    out.append((di, dj))
+                    ring = max(abs(di), abs(dj), abs(di + dj)) if self.mla_layout == "hex" else max(abs(di), abs(dj))
+                    rings = max(rings, ring)
+        if rings > 2:
+            raise ConfigError(
+                f"{_OWNER}: f-number mismatch beyond the model: the main lens (image-side f/{self.image_f_number:.3g}) "
+                f"lights lenslet images {rho / (self.mla_pitch_um * 1e-3 * s):.2f} pitches in radius through "
+                f"f/{self.mla_f_number:.3g} lenslets (gap {self.mla_gap_um:.4g} um), reaching {rings} rings of "
+                f"neighbours (at most 2 are modelled). Stop the main lens down towards f/"
+                f"{self.mla_f_number / (1 + self.magnification):.3g} or use slower lenslets."
+            )
+        return out
+
+    # ------------------------------------------------------------------ design calculators
+    def alpha(self, z_mm):
+        """Refocus parameter ``alpha = s_i'/s_i`` of the plane ``z_mm`` beyond the focal plane."""
+        return alpha_from_z_geom(z_mm, self.focal_length_mm, self.focus_distance_mm)
+
+    def depth_of_field(self, kind: str = "refocused") -> tuple[float, float]:
+        """(near, far) object-space limits [mm, relative to the focal plane, far > 0] of the
+        depth of field of a refocused image (``kind="refocused"``: blur on the MLA plane up to
+        one lenslet pitch through the full aperture) or of a perspective view
+        (``"perspective"``: through one angular sample, ``D / n_u``).
+        """
+        if kind not in ("refocused", "perspective"):
+            raise ConfigError(f"depth_of_field: 'kind' must be 'refocused' or 'perspective', got {kind!r}.")
+        nu = max(self.angular_samples, 1.0) if kind == "perspective" else 1.0
+        return _dof_limits(self.focal_length_mm, self.focus_distance_mm, self.aperture_diameter_mm / nu,
+                           self.mla_pitch_um * 1e-3)
+
+    def depth_resolution(self) -> float:
+        """Smallest depth step [mm] between distinguishable refocus planes at the focal plane:
+        the depth change that moves a point's image by one lenslet pitch between the two
+        outermost angular samples (``n_u - 1`` samples apart across the aperture)."""
+        return depth_resolution_geom(self.focal_length_mm, self.focus_distance_mm, self.aperture_diameter_mm,
+                                     self.mla_pitch_um * 1e-3, self.angular_samples)
+
+    @property
+    def angular_samples(self) -> float:
+        """Angular samples across the aperture image: the pixels spanned by the lenslet image
+        of the aperture, ``D g / (s_i p_px)`` (equals the PMR at f-number matching)."""
+        return self.aperture_diameter_mm * self.gap_mm / self.image_distance_mm / (self.pixel_pitch_um * 1e-3)
+
+    def lateral_resolution_mm(self) -> float:
+        """Object-space size of one lenslet at the focal plane (the refocused pixel)."""
+        return self.mla_pitch_um * 1e-3 / self.magnification
+
+    def pixel_budget(self, particles_per_lenslet: float | None = None) -> dict:
+        """LF-PIV pixel bookkeeping: MLA resolution, pixels per lenslet, and the seeding
+        conversion ``ppp = ppm / (pixels per lenslet)`` (particles per pixel of the raw
+        image vs per microlens), and the light-field-to-tomographic pixel ratio (raw pixels
+        per refocused pixel)."""
+        nx, ny = self.mla_count
+        px_per_lenslet = self.cell_area_mm2 / (self.pixel_pitch_um * 1e-3) ** 2
+        out = {
+            "mla_resolution": [nx, ny],
+            "lenslets": nx * ny,
+            "pixels_per_lenslet_pitch": self.pmr,
+            "pixels_per_lenslet_area": px_per_lenslet,
+            "angular_samples": self.angular_samples,
+            "lf_to_tomo_pixel_ratio": self.resolution[0] * self.resolution[1] / (nx * ny),
+        }
+        if particles_per_lenslet is not None:
+            out["ppm"] = float(particles_per_lenslet)
+            out["ppp"] = float(particles_per_lenslet) / px_per_lenslet
+        return out
+
+    # ------------------------------------------------------------------ metadata
+    def to_dict(self) -> dict:
+        nx, ny = self.mla_count
+        return {
+            "model": "plenoptic_1.0_thin_lens",
+            "convention": "camera-local Mitsuba frame (x left, y up, z forward), main lens at z=0, MLA at "
+            "z=-image_distance_mm, sensor at z=-(image_distance_mm+gap); sensor frame X=(u-W/2)*pitch, "
+            "Y=(v-H/2)*pitch; pixel (i, j) spans [i, i+1)",
+            "resolution": list(self.resolution),
+            "pixel_pitch_um": self.pixel_pitch_um,
+            "focal_length_mm": self.focal_length_mm,
+            "f_number": self.f_number,
+            "aperture_diameter_mm": self.aperture_diameter_mm,
+            "focus_distance_mm": self.focus_distance_mm,
+            "image_distance_mm": self.image_distance_mm,
+            "magnification": self.magnification,
+            "image_f_number": self.image_f_number,
+            "mla_pitch_um": self.mla_pitch_um,
+            "mla_focal_length_um": self.mla_focal_length_um,
+            "mla_f_number": self.mla_f_number,
+            "mla_layout": self.mla_layout,
+            "mla_count": [nx, ny],
+            "mla_rotation_deg": self.mla_rotation_deg,
+            "mla_offset_um": list(self.mla_offset_um),
+            "mla_gap_um": self.mla_gap_um,
+            "pmr": self.pmr,
+            "image_scale": self.image_scale,
+            "lattice_basis_mm": self.basis_mm.tolist(),
+            "lattice_origin_mm": self.origin_mm.tolist(),
+            "crosstalk_offsets": [list(o) for o in self.crosstalk_offsets()],
+            "to_world_mitsuba": self.to_world_mitsuba.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> PlenopticCamera:
+        return cls(
+            resolution=tuple(d["resolution"]), pixel_pitch_um=d["pixel_pitch_um"], focal_length_mm=d["focal_length_mm"],
+            focus_distance_mm=d["focus_distance_mm"], mla_pitch_um=d["mla_pitch_um"],
+            aperture_diameter_mm=d["aperture_diameter_mm"], mla_focal_length_um=d["mla_focal_length_um"],
+            mla_layout=d["mla_layout"], mla_count=tuple(d["mla_count"]), mla_rotation_deg=d["mla_rotation_deg"],
+            mla_offset_um=tuple(d["mla_offset_um"]), mla_gap_um=d["mla_gap_um"],
+            to_world_mitsuba=np.asarray(d["to_world_mitsuba"]),
+        )
+
+    # ------------------------------------------------------------------ pose
+    def world_to_local(self, p_world) -> np.ndarray:
+        """World points (..., 3) -> camera-local (Mitsuba frame, lens at the origin)."""
+        m = self.to_world_mitsuba
+        return (np.asarray(p_world, dtype=float) - m[:3, 3]) @ m[:3, :3]
+
+
+# ---------------------------------------------------------------------- helpers
+def _point_polygon_distance(p, poly) -> float:
+    """Distance from point ``p`` to a convex polygon (0 inside)."""
+    n = len(poly)
+    inside = True
+    best = np.inf
+    for k in range(n):
+        a, b = poly[k], poly[(k + 1) % n]
+        e = b - a
+        cross = e[0] * (p[1] - a[1]) - e[1] * (p[0] - a[0])
+        if cross < 0:
+            inside = False
+        t = np.clip((p - a) @ e / (e @ e), 0.0, 1.0)
+        best = min(best, float(np.linalg.norm(p - (a + t * e))))
+    # Vertices are counter-clockwise for both layouts; a point inside has every cross >= 0.
+    return 0.0 if inside else best
+
+
+def alpha_from_z_geom(z_mm, focal_length_mm: float, focus_distance_mm: float):
+    """``alpha = s_i(s_o + z) / s_i(s_o)`` by the thin-lens equation (z > 0 farther)."""
+    so = focus_distance_mm + np.asarray(z_mm, dtype=float)
+    if np.any(so <= focal_length_mm):
+        raise ConfigError(
+            f"alpha_from_z: z = {np.min(np.asarray(z_mm)):.6g} mm puts the object at or inside the focal length "
+            f"({focal_length_mm} mm from the lens; focal plane at {focus_distance_mm} mm). Use z > "
+            f"{focal_length_mm - focus_distance_mm:.6g} mm."
+        )
+    return thin_lens_image_distance(focal_length_mm, so) / thin_lens_image_distance(focal_length_mm, focus_distance_mm)
+
+
+def _dof_limits(f, so, aperture, blur):
+    """Object-space (near, far) offsets where the blur spot on the MLA plane reaches ``blur``."""
+    si = float(thin_lens_image_distance(f, so))
+    # Blur on the plane at si from an image at si': aperture |si - si'| / si' = blur.
+    si_far = si * aperture / (aperture + blur)  # image closer to the lens -> object farther
+    si_near = si * aperture / (aperture - blur) if aperture > blur else np.inf
+    so_far = f * si_far / (si_far - f) if si_far > f else np.inf
+    so_near = f * si_near / (si_near - f) if np.isfinite(si_near) else f
+    return float(so_near - so), float(so_far - so)
+
+
+def depth_resolution_geom(f, so, aperture, pitch, n_u) -> float:
+    """Depth step [mm] that shifts a point's image by one lenslet pitch between the
+    outermost angular samples (baseline ``aperture (n_u - 1) / n_u``), at the focal plane."""
+    si = float(thin_lens_image_distance(f, so))
+    base = aperture * max(n_u - 1.0, 1.0) / max(n_u, 1.0)
+    dsi = pitch * si / base  # image-side shift of the refocus plane
+    m = si / so
+    return float(dsi / (m * m))
