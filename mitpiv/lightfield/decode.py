@@ -193,7 +193,7 @@ def _grid_weights(cal: MLACalibration, s_px, t_px):
 
 def decode(raw, calibration: MLACalibration | None = None, *, white=None, interpolation: str = "linear",
            angular_oversample: int = 1, optics: PlenopticCamera | None = None,
-           white_threshold: float = 0.05) -> LightField:
+           white_threshold: float = 0.05, min_view_weight: float = 0.1) -> LightField:
     """Decode a raw plenoptic image.
 
     Parameters
@@ -214,6 +214,9 @@ def decode(raw, calibration: MLACalibration | None = None, *, white=None, interp
     white_threshold : float
         Light-field samples where the white light field is below this fraction of its
         maximum are set to zero (no light reaches them).
+    min_view_weight : float
+        With a white image: views collecting less than this fraction of the best view's
+        light get weight 0 (left out of refocusing).
     """
     if interpolation not in INTERPOLATION:
         raise ConfigError(f"decode: 'interpolation' must be one of {sorted(INTERPOLATION)}, got {interpolation!r}.")
@@ -239,6 +242,7 @@ def decode(raw, calibration: MLACalibration | None = None, *, white=None, interp
     s_px = o[0] + pitch * np.arange(math.ceil((lo[0] - o[0]) / pitch - 1e-9), math.floor((hi[0] - o[0]) / pitch + 1e-9) + 1)
     t_px = o[1] + row * np.arange(math.ceil((lo[1] - o[1]) / row - 1e-9), math.floor((hi[1] - o[1]) / row + 1e-9) + 1)
     idx, w, valid = _grid_weights(cal, s_px, t_px)
+    valid = valid.reshape(len(t_px), len(s_px))
     order = INTERPOLATION[interpolation]
 
     def to_grid(image):
@@ -263,6 +267,7 @@ def decode(raw, calibration: MLACalibration | None = None, *, white=None, interp
         data = np.where(lit, data / np.where(lit, wlf, 1.0), 0.0).astype(np.float32)
         vw = (wlf * valid[None, None]).sum(axis=(2, 3))
         weights = vw / vw.max()
+        weights[weights < min_view_weight] = 0.0  # views at the rim of the aperture image: too little light to trust
     elif optics is not None:
         r_img = optics.aperture_radius_mm * optics.gap_mm / optics.image_distance_mm / (optics.pixel_pitch_um * 1e-3)
         weights = (np.hypot(du[None, :], du[:, None]) <= r_img).astype(np.float64)
@@ -270,4 +275,4 @@ def decode(raw, calibration: MLACalibration | None = None, *, white=None, interp
         weights = np.ones((n, n))
     info = {"interpolation": interpolation, "angular_oversample": int(angular_oversample),
             "calibration": cal.to_dict(), "devignetted": white is not None}
-    return LightField(data, s_px, t_px, du, weights.astype(np.float64), valid.reshape(len(t_px), len(s_px)), optics, info)
+    return LightField(data, s_px, t_px, du, weights.astype(np.float64), valid, optics, info)

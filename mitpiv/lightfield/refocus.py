@@ -12,7 +12,9 @@ lens). ``alpha = s_i'/s_i`` of the refocus plane; a world point at local ``(x, y
   ``w`` from the white image, so a point is bright only where every view sees light.
 
 Samples falling outside the light field are left out of both (the weight sum counts only
-the views that land inside). The kernels run in parallel over output rows (Numba).
+the views that land inside); an output point that fewer than ``min_view_fraction`` of the
+total view weight reaches (the borders of a refocused plane) is set to zero rather than
+estimated from a few views. The kernels run in parallel over output rows (Numba).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ __all__ = ["refocus", "focal_stack", "refocus_volume", "METHODS"]
 
 METHODS = ("additive", "multiplicative")
 _MAX_IN_MEMORY = 2 * 1024**3  # bytes: larger stacks must stream to a file
+_EPS = 1e-6  # grid units: samples this close outside the border count as on it
 
 
 def _numba():
@@ -51,7 +54,7 @@ def _kernels():
     nb = _numba()
 
     @nb.njit(parallel=True, fastmath=False, cache=True)
-    def plane(views, w, base_s, base_t, sh_u, sh_v, mult, nearest, out):
+    def plane(views, w, base_s, base_t, sh_u, sh_v, mult, nearest, wmin, out):
         nv, nu, nt, ns = views.shape
         for ti in nb.prange(base_t.shape[0]):
             m = base_s.shape[0]
@@ -60,6 +63,8 @@ def _kernels():
             dark = np.zeros(m, np.bool_)
             for iv in range(nv):
                 y = base_t[ti] + sh_v[iv]
+                if -_EPS < y < 0.0 or nt - 1 < y < nt - 1 + _EPS:  # rounding at the border
+                    y = min(max(y, 0.0), nt - 1.0)
                 if y < 0.0 or y > nt - 1:
                     continue
                 if nearest:
@@ -72,6 +77,8 @@ def _kernels():
                         continue
                     for si in range(m):
                         x = base_s[si] + sh_u[iu]
+                        if -_EPS < x < 0.0 or ns - 1 < x < ns - 1 + _EPS:
+                            x = min(max(x, 0.0), ns - 1.0)
                         if x < 0.0 or x > ns - 1:
                             continue
                         if nearest:
@@ -90,7 +97,7 @@ def _kernels():
                             acc[si] += wt * val
                         wacc[si] += wt
             for si in range(m):
-                if wacc[si] <= 0.0 or (mult and dark[si]):
+                if wacc[si] <= 0.0 or wacc[si] < wmin or (mult and dark[si]):
                     out[ti, si] = 0.0
                 elif mult:
                     out[ti, si] = math.exp(acc[si] / wacc[si])
@@ -98,7 +105,7 @@ def _kernels():
                     out[ti, si] = acc[si] / wacc[si]
 
     @nb.njit(parallel=True, fastmath=False, cache=True)
-    def points(views, w, bs, bt, gs, gt, au, av, mult, out):
+    def points(views, w, bs, bt, gs, gt, au, av, mult, wmin, out):
         """Per output point (flattened): position (bs, bt) + (gs au[iu], gt av[iv]) in grid units."""
         nv, nu, nt, ns = views.shape
         for k in nb.prange(bs.shape[0]):
@@ -107,6 +114,8 @@ def _kernels():
             dark = False
             for iv in range(nv):
                 y = bt[k] + gt[k] * av[iv]
+                if -_EPS < y < 0.0 or nt - 1 < y < nt - 1 + _EPS:
+                    y = min(max(y, 0.0), nt - 1.0)
                 if y < 0.0 or y > nt - 1:
                     continue
                 y0 = min(int(math.floor(y)), nt - 2) if nt > 1 else 0
@@ -117,6 +126,8 @@ def _kernels():
                     if wt <= 0.0:
                         continue
                     x = bs[k] + gs[k] * au[iu]
+                    if -_EPS < x < 0.0 or ns - 1 < x < ns - 1 + _EPS:
+                        x = min(max(x, 0.0), ns - 1.0)
                     if x < 0.0 or x > ns - 1:
                         continue
                     x0 = min(int(math.floor(x)), ns - 2) if ns > 1 else 0
@@ -132,7 +143,7 @@ def _kernels():
                     else:
                         acc += wt * val
                     wacc += wt
-            if wacc <= 0.0 or (mult and dark):
+            if wacc <= 0.0 or wacc < wmin or (mult and dark):
                 out[k] = 0.0
             elif mult:
                 out[k] = math.exp(acc / wacc)
@@ -155,6 +166,12 @@ def _weights(lf: LightField, weights):
     if not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
         raise ConfigError("refocus: 'weights' must be finite, >= 0 and not all zero.")
     return np.ascontiguousarray(w)
+
+
+def _wmin(w, fraction) -> float:
+    if not 0.0 <= fraction <= 1.0:
+        raise ConfigError(f"refocus: 'min_view_fraction' must lie in [0, 1], got {fraction!r}.")
+    return float(fraction * w.sum() * (1 - 1e-9))
 
 
 def _plane_geometry(lf: LightField, alpha: float, magnification: str, z_mm: float | None):
@@ -195,7 +212,7 @@ def _plane_geometry(lf: LightField, alpha: float, magnification: str, z_mm: floa
 
 
 def refocus(lf: LightField, alpha: float, *, method: str = "additive", magnification: str = "natural",
-            weights=None, interpolation: str = "linear") -> np.ndarray:
+            weights=None, interpolation: str = "linear", min_view_fraction: float = 0.5) -> np.ndarray:
     """Refocus onto the plane ``alpha = s_i'/s_i`` (1: the MLA plane / focal plane).
 
     Parameters
@@ -211,6 +228,8 @@ def refocus(lf: LightField, alpha: float, *, method: str = "additive", magnifica
         View weights (default ``lf.view_weights``).
     interpolation : "linear" | "nearest"
         Resampling of the sub-aperture images.
+    min_view_fraction : float
+        Output points reached by less than this fraction of the view weight are zero.
 
     Returns
     -------
@@ -222,12 +241,14 @@ def refocus(lf: LightField, alpha: float, *, method: str = "additive", magnifica
     w = _weights(lf, weights)
     out = np.empty((len(lf.t_px), len(lf.s_px)), np.float32)
     base_s, base_t, sh_u, sh_v = _plane_geometry(lf, float(alpha), magnification, None)
-    _kernels()["plane"](lf.data, w, base_s, base_t, sh_u, sh_v, method == "multiplicative", interpolation == "nearest", out)
+    _kernels()["plane"](lf.data, w, base_s, base_t, sh_u, sh_v, method == "multiplicative", interpolation == "nearest",
+                        _wmin(w, min_view_fraction), out)
     return out
 
 
 def focal_stack(lf: LightField, z_mm, *, method: str = "additive", magnification: str = "natural", weights=None,
-                interpolation: str = "linear", out=None, progress: bool = False) -> np.ndarray:
+                interpolation: str = "linear", min_view_fraction: float = 0.5, out=None,
+                progress: bool = False) -> np.ndarray:
     """Refocused images at depths ``z_mm`` from the focal plane (positive = farther).
 
     Parameters
@@ -273,7 +294,8 @@ def focal_stack(lf: LightField, z_mm, *, method: str = "additive", magnification
     try:
         for k, (zk, ak) in enumerate(zip(z, alphas, strict=True)):
             base_s, base_t, sh_u, sh_v = _plane_geometry(lf, float(ak), magnification, float(zk))
-            kern(lf.data, w, base_s, base_t, sh_u, sh_v, method == "multiplicative", interpolation == "nearest", stack[k])
+            kern(lf.data, w, base_s, base_t, sh_u, sh_v, method == "multiplicative", interpolation == "nearest",
+                 _wmin(w, min_view_fraction), stack[k])
             if progress and ((k + 1) % step == 0 or k + 1 == len(z)):
                 el = time.perf_counter() - t0
                 print(f"focal stack: {k + 1}/{len(z)} planes, {el:.1f} s, {el / (k + 1) * 1e3:.1f} ms/plane", file=sys.stderr, flush=True)
@@ -291,7 +313,7 @@ def focal_stack(lf: LightField, z_mm, *, method: str = "additive", magnification
 
 
 def refocus_volume(lf: LightField, x_mm, y_mm, z_mm, *, method: str = "additive", weights=None,
-                   out=None, progress: bool = False) -> np.ndarray:
+                   min_view_fraction: float = 0.5, out=None, progress: bool = False) -> np.ndarray:
     """Refocus directly onto a world voxel grid (any camera pose).
 
     For each voxel centre ``(x, y, z)`` (world mm) and each view, the ray from the view's
@@ -335,7 +357,8 @@ def refocus_volume(lf: LightField, x_mm, y_mm, z_mm, *, method: str = "additive"
         bs = (bx * sc + cx - lf.s_px[0]) / ds
         bt = (by * sc + cy - lf.t_px[0]) / dt
         res = np.empty(len(bs), np.float32)
-        kern(lf.data, w, bs, bt, gamma * sc / ds, gamma * sc / dt, a, a, method == "multiplicative", res)
+        kern(lf.data, w, bs, bt, gamma * sc / ds, gamma * sc / dt, a, a, method == "multiplicative",
+             _wmin(w, min_view_fraction), res)
         stack[k] = res.reshape(len(ys), len(xs))
         if progress:
             print(f"refocus_volume: plane {k + 1}/{len(zs)}", file=sys.stderr, flush=True)

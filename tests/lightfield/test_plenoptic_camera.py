@@ -186,7 +186,7 @@ def test_metadata_round_trip():
     ({"mla_pitch_um": 0.0}, "mla_pitch_um"),
     ({"mla_pitch_um": 2000.0}, "larger than the sensor"),
     ({"mla_pitch_um": 8.0}, "at least 2 pixels"),
-    ({"f_number": 0.7, "mla_focal_length_um": 192.5}, "f-number mismatch"),
+    ({"f_number": 0.5, "mla_focal_length_um": 192.5}, "f-number mismatch"),
     ({"focus_distance_mm": 40.0}, "focus_distance_mm"),
     ({"mla_layout": "triangle"}, "mla_layout"),
     ({"mla_count_x": 1000, "mla_count_y": 1000}, "mla_count"),
