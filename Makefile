@@ -22,6 +22,7 @@ bench: setup
 	$(PY) bench/bench_cameras.py
 	$(PY) bench/bench_mie.py
 	$(PY) bench/bench_optics.py
+	$(PY) bench/bench_lightfield.py
 
 clean:
 	rm -rf out .pytest_cache
