@@ -191,21 +191,11 @@ def _plane_geometry(lf: LightField, alpha: float, magnification: str, z_mm: floa
         raise ConfigError(f"refocus: 'magnification' must be 'natural' or 'constant', got {magnification!r}.")
     # Shift of view a on the MLA plane: gamma a (mm) = gamma * (-du p s_i / g) = gamma * du * (-s_i/g) px
     # of the sensor, i.e. gamma * du * (-s_i/g) / (1 + g/s_i)-scaled lattice units (px of the grid).
-    if lf.optics is not None:
-        o = lf.optics
-        k = -o.image_distance_mm / o.gap_mm * o.image_scale  # aperture offset in lattice-image pixels per du
-    else:
-        k = -lf.info.get("aperture_px_per_du", 1.0)
-    s_idx = np.arange(len(lf.s_px), dtype=np.float64)
-    t_idx = np.arange(len(lf.t_px), dtype=np.float64)
-    # kappa scales about the optical axis (sensor centre), in grid units
-    if lf.optics is not None:
-        cx, cy = lf.optics.resolution[0] / 2.0, lf.optics.resolution[1] / 2.0
-    else:
-        cx, cy = lf.s_px.mean(), lf.t_px.mean()
+    o = lf._need_optics("refocus")  # s_i / g converts pixel offsets to aperture points
+    k = -o.image_distance_mm / o.gap_mm * o.image_scale  # aperture offset in lattice-image pixels per du
+    cx, cy = o.resolution[0] / 2.0, o.resolution[1] / 2.0  # constant magnification scales about the axis
     base_s = ((cx + kappa * (lf.s_px - cx)) - lf.s_px[0]) / ds
     base_t = ((cy + kappa * (lf.t_px - cy)) - lf.t_px[0]) / dt
-    del s_idx, t_idx
     sh_u = gamma * k * lf.du_px / ds
     sh_v = gamma * k * lf.du_px / dt
     return base_s, base_t, sh_u, sh_v
