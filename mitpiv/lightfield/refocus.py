@@ -23,11 +23,13 @@ import math
 import os
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from mitpiv.errors import ConfigError
+from mitpiv.io.atomic import atomic_path
 from mitpiv.lightfield.decode import LightField
 from mitpiv.lightfield.geometry import alpha_from_z, z_from_alpha
 
@@ -53,6 +55,29 @@ def _kernels():
         return _KERNELS
     nb = _numba()
 
+    @nb.njit(inline="always", cache=True)
+    def on_grid(x, n):
+        """x snapped onto [0, n-1] when it is within rounding of the border; NaN outside."""
+        if -_EPS < x < 0.0 or n - 1 < x < n - 1 + _EPS:
+            x = min(max(x, 0.0), n - 1.0)
+        return x if 0.0 <= x <= n - 1 else math.nan
+
+    @nb.njit(inline="always", cache=True)
+    def cell(x, n):
+        """Lower node, fraction and upper node of the linear interpolation at x."""
+        x0 = min(int(math.floor(x)), n - 2) if n > 1 else 0
+        return x0, x - x0, min(x0 + 1, n - 1)
+
+    @nb.njit(inline="always", cache=True)
+    def bilinear(img, y0, fy, y1, x0, fx, x1):
+        return (1.0 - fy) * ((1.0 - fx) * img[y0, x0] + fx * img[y0, x1]) + fy * ((1.0 - fx) * img[y1, x0] + fx * img[y1, x1])
+
+    @nb.njit(inline="always", cache=True)
+    def result(acc, wacc, dark, wmin, mult):
+        if wacc <= 0.0 or wacc < wmin or (mult and dark):
+            return 0.0
+        return math.exp(acc / wacc) if mult else acc / wacc
+
     @nb.njit(parallel=True, fastmath=False, cache=True)
     def plane(views, w, base_s, base_t, sh_u, sh_v, mult, nearest, wmin, out):
         nv, nu, nt, ns = views.shape
@@ -62,47 +87,34 @@ def _kernels():
             wacc = np.zeros(m)
             dark = np.zeros(m, np.bool_)
             for iv in range(nv):
-                y = base_t[ti] + sh_v[iv]
-                if -_EPS < y < 0.0 or nt - 1 < y < nt - 1 + _EPS:  # rounding at the border
-                    y = min(max(y, 0.0), nt - 1.0)
-                if y < 0.0 or y > nt - 1:
+                y = on_grid(base_t[ti] + sh_v[iv], nt)
+                if math.isnan(y):
                     continue
                 if nearest:
                     y = math.floor(y + 0.5)
-                y0 = min(int(math.floor(y)), nt - 2) if nt > 1 else 0
-                fy = y - y0
+                y0, fy, y1 = cell(y, nt)
                 for iu in range(nu):
                     wt = w[iv, iu]
                     if wt <= 0.0:
                         continue
+                    img = views[iv, iu]
                     for si in range(m):
-                        x = base_s[si] + sh_u[iu]
-                        if -_EPS < x < 0.0 or ns - 1 < x < ns - 1 + _EPS:
-                            x = min(max(x, 0.0), ns - 1.0)
-                        if x < 0.0 or x > ns - 1:
+                        x = on_grid(base_s[si] + sh_u[iu], ns)
+                        if math.isnan(x):
                             continue
                         if nearest:
                             x = math.floor(x + 0.5)
-                        x0 = min(int(math.floor(x)), ns - 2) if ns > 1 else 0
-                        fx = x - x0
-                        val = (1.0 - fy) * ((1.0 - fx) * views[iv, iu, y0, x0] + fx * views[iv, iu, y0, min(x0 + 1, ns - 1)]) \
-                            + fy * ((1.0 - fx) * views[iv, iu, min(y0 + 1, nt - 1), x0]
-                                    + fx * views[iv, iu, min(y0 + 1, nt - 1), min(x0 + 1, ns - 1)])
-                        if mult:
-                            if val > 0.0:
-                                acc[si] += wt * math.log(val)
-                            else:
-                                dark[si] = True
-                        else:
+                        x0, fx, x1 = cell(x, ns)
+                        val = bilinear(img, y0, fy, y1, x0, fx, x1)
+                        if not mult:
                             acc[si] += wt * val
+                        elif val > 0.0:
+                            acc[si] += wt * math.log(val)
+                        else:
+                            dark[si] = True
                         wacc[si] += wt
             for si in range(m):
-                if wacc[si] <= 0.0 or wacc[si] < wmin or (mult and dark[si]):
-                    out[ti, si] = 0.0
-                elif mult:
-                    out[ti, si] = math.exp(acc[si] / wacc[si])
-                else:
-                    out[ti, si] = acc[si] / wacc[si]
+                out[ti, si] = result(acc[si], wacc[si], dark[si], wmin, mult)
 
     @nb.njit(parallel=True, fastmath=False, cache=True)
     def points(views, w, bs, bt, gs, gt, au, av, mult, wmin, out):
@@ -113,45 +125,52 @@ def _kernels():
             wacc = 0.0
             dark = False
             for iv in range(nv):
-                y = bt[k] + gt[k] * av[iv]
-                if -_EPS < y < 0.0 or nt - 1 < y < nt - 1 + _EPS:
-                    y = min(max(y, 0.0), nt - 1.0)
-                if y < 0.0 or y > nt - 1:
+                y = on_grid(bt[k] + gt[k] * av[iv], nt)
+                if math.isnan(y):
                     continue
-                y0 = min(int(math.floor(y)), nt - 2) if nt > 1 else 0
-                fy = y - y0
-                y1 = min(y0 + 1, nt - 1)
+                y0, fy, y1 = cell(y, nt)
                 for iu in range(nu):
                     wt = w[iv, iu]
                     if wt <= 0.0:
                         continue
-                    x = bs[k] + gs[k] * au[iu]
-                    if -_EPS < x < 0.0 or ns - 1 < x < ns - 1 + _EPS:
-                        x = min(max(x, 0.0), ns - 1.0)
-                    if x < 0.0 or x > ns - 1:
+                    x = on_grid(bs[k] + gs[k] * au[iu], ns)
+                    if math.isnan(x):
                         continue
-                    x0 = min(int(math.floor(x)), ns - 2) if ns > 1 else 0
-                    fx = x - x0
-                    x1 = min(x0 + 1, ns - 1)
-                    val = (1.0 - fy) * ((1.0 - fx) * views[iv, iu, y0, x0] + fx * views[iv, iu, y0, x1]) \
-                        + fy * ((1.0 - fx) * views[iv, iu, y1, x0] + fx * views[iv, iu, y1, x1])
-                    if mult:
-                        if val > 0.0:
-                            acc += wt * math.log(val)
-                        else:
-                            dark = True
-                    else:
+                    x0, fx, x1 = cell(x, ns)
+                    val = bilinear(views[iv, iu], y0, fy, y1, x0, fx, x1)
+                    if not mult:
                         acc += wt * val
+                    elif val > 0.0:
+                        acc += wt * math.log(val)
+                    else:
+                        dark = True
                     wacc += wt
-            if wacc <= 0.0 or wacc < wmin or (mult and dark):
-                out[k] = 0.0
-            elif mult:
-                out[k] = math.exp(acc / wacc)
-            else:
-                out[k] = acc / wacc
+            out[k] = result(acc, wacc, dark, wmin, mult)
 
     _KERNELS.update(plane=plane, points=points)
     return _KERNELS
+
+
+@contextmanager
+def _output(shape, out, what):
+    """Yield the float32 array a stack is written into: in memory, or (``out``) a memory map
+    of a temporary ``.npy`` beside ``out`` that replaces it only once complete."""
+    if out is None:
+        nbytes = 4 * math.prod(shape)
+        if nbytes > _MAX_IN_MEMORY:
+            raise ConfigError(f"{what}: the result needs {nbytes / 1024**3:.1f} GiB; give out='result.npy' to stream it to disk.")
+        yield np.empty(shape, np.float32)
+        return
+    path = Path(out)
+    if path.suffix != ".npy":
+        raise ConfigError(f"{what}: 'out' must be a .npy file, got {str(path)!r}.")
+    with atomic_path(path, suffix=".npy") as tmp:
+        arr = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=shape)
+        try:
+            yield arr
+            arr.flush()
+        finally:
+            del arr
 
 
 def _check_method(method):
@@ -174,12 +193,18 @@ def _wmin(w, fraction) -> float:
     return float(fraction * w.sum() * (1 - 1e-9))
 
 
+def _grid_steps(lf: LightField) -> tuple[float, float]:
+    """Spacing [px] of the spatial grid along s and t."""
+    ds = lf.s_px[1] - lf.s_px[0] if len(lf.s_px) > 1 else 1.0
+    dt = lf.t_px[1] - lf.t_px[0] if len(lf.t_px) > 1 else 1.0
+    return ds, dt
+
+
 def _plane_geometry(lf: LightField, alpha: float, magnification: str, z_mm: float | None):
     """Grid-unit positions (base_s, base_t) and per-view shifts (sh_u, sh_v) of one plane."""
     if not (np.isfinite(alpha) and alpha > 0):
         raise ConfigError(f"refocus: 'alpha' must be finite and > 0, got {alpha!r}.")
-    ds = lf.s_px[1] - lf.s_px[0] if len(lf.s_px) > 1 else 1.0
-    dt = lf.t_px[1] - lf.t_px[0] if len(lf.t_px) > 1 else 1.0
+    ds, dt = _grid_steps(lf)
     gamma = 1.0 - 1.0 / alpha
     kappa = 1.0
     if magnification == "constant":
@@ -264,24 +289,10 @@ def focal_stack(lf: LightField, z_mm, *, method: str = "additive", magnification
     alphas = alpha_from_z(z, focal_length_mm=o.focal_length_mm, magnification=o.magnification)
     w = _weights(lf, weights)
     shape = (len(z), len(lf.t_px), len(lf.s_px))
-    nbytes = 4 * math.prod(shape)
-    if out is None and nbytes > _MAX_IN_MEMORY:
-        raise ConfigError(f"focal_stack: the stack needs {nbytes / 1024**3:.1f} GiB; give out='stack.npy' to stream it to disk.")
-    if out is not None:
-        from mitpiv.io.atomic import atomic_path
-
-        path = Path(out)
-        if path.suffix != ".npy":
-            raise ConfigError(f"focal_stack: 'out' must be a .npy file, got {str(path)!r}.")
-        ctx = atomic_path(path, suffix=".npy")
-        tmp = ctx.__enter__()
-        stack = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=shape)
-    else:
-        stack = np.empty(shape, np.float32)
     kern = _kernels()["plane"]
     t0 = time.perf_counter()
     step = max(len(z) // 20, 1)
-    try:
+    with _output(shape, out, "focal_stack") as stack:
         for k, (zk, ak) in enumerate(zip(z, alphas, strict=True)):
             base_s, base_t, sh_u, sh_v = _plane_geometry(lf, float(ak), magnification, float(zk))
             kern(lf.data, w, base_s, base_t, sh_u, sh_v, method == "multiplicative", interpolation == "nearest",
@@ -289,17 +300,8 @@ def focal_stack(lf: LightField, z_mm, *, method: str = "additive", magnification
             if progress and ((k + 1) % step == 0 or k + 1 == len(z)):
                 el = time.perf_counter() - t0
                 print(f"focal stack: {k + 1}/{len(z)} planes, {el:.1f} s, {el / (k + 1) * 1e3:.1f} ms/plane", file=sys.stderr, flush=True)
-    except BaseException:
-        if out is not None:
-            del stack
-            ctx.__exit__(*sys.exc_info())
-        raise
-    if out is not None:
-        stack.flush()
-        del stack
-        ctx.__exit__(None, None, None)
-        return np.load(out, mmap_mode="r")
-    return stack
+        result = stack if out is None else None
+    return result if out is None else np.load(out, mmap_mode="r")
 
 
 def refocus_volume(lf: LightField, x_mm, y_mm, z_mm, *, method: str = "additive", weights=None,
@@ -319,39 +321,28 @@ def refocus_volume(lf: LightField, x_mm, y_mm, z_mm, *, method: str = "additive"
     xs, ys, zs = (np.atleast_1d(np.asarray(a, dtype=np.float64)) for a in (x_mm, y_mm, z_mm))
     w = _weights(lf, weights)
     shape = (len(zs), len(ys), len(xs))
-    if out is not None:
-        stack = np.lib.format.open_memmap(Path(out), mode="w+", dtype=np.float32, shape=shape)
-    else:
-        if 4 * math.prod(shape) > _MAX_IN_MEMORY:
-            raise ConfigError("refocus_volume: the volume exceeds 2 GiB; give out='volume.npy'.")
-        stack = np.empty(shape, np.float32)
-    ds = lf.s_px[1] - lf.s_px[0] if len(lf.s_px) > 1 else 1.0
-    dt = lf.t_px[1] - lf.t_px[0] if len(lf.t_px) > 1 else 1.0
+    ds, dt = _grid_steps(lf)
     pp = o.pixel_pitch_um * 1e-3
     si, f = o.image_distance_mm, o.focal_length_mm
     a = lf.aperture_mm
     cx, cy = o.resolution[0] / 2.0, o.resolution[1] / 2.0
+    sc = o.image_scale / pp  # MLA-plane mm -> lattice-image px
     kern = _kernels()["points"]
     yy, xx = np.meshgrid(ys, xs, indexing="ij")
-    for k, zw in enumerate(zs):
-        loc = o.world_to_local(np.stack([xx, yy, np.full_like(xx, zw)], axis=-1).reshape(-1, 3))
-        if np.any(loc[:, 2] <= f):
-            raise ConfigError(f"refocus_volume: voxels at z = {zw} mm lie within the focal length of the main lens "
-                              f"(or behind the camera); move the grid in front of the camera.")
-        sip = f * loc[:, 2] / (loc[:, 2] - f)
-        gamma = 1.0 - si / sip
-        bx = -loc[:, 0] * si / loc[:, 2]  # MLA-plane point of the chief ray (sensor frame mm)
-        by = -loc[:, 1] * si / loc[:, 2]
-        # MLA mm -> lattice-image px: * image_scale / pp + centre
-        sc = o.image_scale / pp
-        bs = (bx * sc + cx - lf.s_px[0]) / ds
-        bt = (by * sc + cy - lf.t_px[0]) / dt
-        res = np.empty(len(bs), np.float32)
-        kern(lf.data, w, bs, bt, gamma * sc / ds, gamma * sc / dt, a, a, method == "multiplicative",
-             _wmin(w, min_view_fraction), res)
-        stack[k] = res.reshape(len(ys), len(xs))
-        if progress:
-            print(f"refocus_volume: plane {k + 1}/{len(zs)}", file=sys.stderr, flush=True)
-    if out is not None:
-        stack.flush()
-    return stack
+    with _output(shape, out, "refocus_volume") as stack:
+        for k, zw in enumerate(zs):
+            loc = o.world_to_local(np.stack([xx, yy, np.full_like(xx, zw)], axis=-1).reshape(-1, 3))
+            if np.any(loc[:, 2] <= f):
+                raise ConfigError(f"refocus_volume: voxels at z = {zw} mm lie within the focal length of the main lens "
+                                  f"(or behind the camera); move the grid in front of the camera.")
+            gamma = 1.0 - si * (loc[:, 2] - f) / (f * loc[:, 2])  # 1 - s_i / s_i'
+            bs = (-loc[:, 0] * si / loc[:, 2] * sc + cx - lf.s_px[0]) / ds  # chief ray on the MLA, grid units
+            bt = (-loc[:, 1] * si / loc[:, 2] * sc + cy - lf.t_px[0]) / dt
+            res = np.empty(len(bs), np.float32)
+            kern(lf.data, w, bs, bt, gamma * sc / ds, gamma * sc / dt, a, a, method == "multiplicative",
+                 _wmin(w, min_view_fraction), res)
+            stack[k] = res.reshape(len(ys), len(xs))
+            if progress:
+                print(f"refocus_volume: plane {k + 1}/{len(zs)}", file=sys.stderr, flush=True)
+        result = stack if out is None else None
+    return result if out is None else np.load(out, mmap_mode="r")
