@@ -78,7 +78,6 @@ def calibration_from_camera(camera, *, margin_px: float | None = None) -> MLACal
     origin = camera.sensor_mm_to_px(camera.origin_mm * camera.image_scale)
     axial = np.column_stack([i.ravel(), j.ravel()])
     keep = _inside(centres, camera.resolution, 0.5 * np.linalg.norm(basis[0]) if margin_px is None else margin_px)
-    # Re-base the axial indices on the lenslet at (col 0, row 0) = axial (0, 0).
     return MLACalibration(camera.mla_layout, basis, origin, axial[keep], centres[keep])
 
 

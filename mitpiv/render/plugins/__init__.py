@@ -9,7 +9,8 @@ from __future__ import annotations
 import importlib
 import sys
 
-PLUGINS = ("laser_sheet", "mie_phase", "tracer_particles", "distorted_pinhole", "plenoptic", "particle_tracer")
+# _sensor first: the sensor plugins subclass its variant-specific base.
+PLUGINS = ("_sensor", "laser_sheet", "mie_phase", "tracer_particles", "distorted_pinhole", "plenoptic", "particle_tracer")
 
 
 def register_all() -> None:

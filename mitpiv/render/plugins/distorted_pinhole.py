@@ -144,20 +144,19 @@ from mitpiv.imaging import RenderPSF
 from mitpiv.physics.camera import PinholeCamera
 from mitpiv.physics.distortion import Distortion, distort_jacobian, percent_to_k1, undistort
 from mitpiv.render.plugins._props import PropertyReader, read_placement
+from mitpiv.render.plugins._sensor import MitpivSensor, film_resolution
 
 _VARIANT = mi.variant()
 
 
-class DistortedPinhole(mi.Sensor):
+class DistortedPinhole(MitpivSensor):
     """Distorted pinhole / thin-lens sensor; see the module docstring for parameters."""
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
         rd = PropertyReader(props, "distorted_pinhole")
         film = self.film()
-        w, h = (int(v) for v in film.size())
-        if tuple(film.crop_size()) != (w, h):
-            raise ConfigError("distorted_pinhole: film crop windows are not supported; remove crop_*.")
+        w, h = film_resolution(self, "distorted_pinhole")
         self.resolution = (w, h)
 
         pitch = check_positive("pixel_pitch_um", rd.float("pixel_pitch_um", 10.0), owner="distorted_pinhole", unit="um")
@@ -340,10 +339,6 @@ class DistortedPinhole(mi.Sensor):
         ray.maxt = (self.far_clip - self.near_clip) * inv_z
         return ray, wav_weight
 
-    def sample_ray_differential(self, time, sample1, sample2, sample3, active=True):
-        ray, weight = self.sample_ray(time, sample1, sample2, sample3, active)
-        return mi.RayDifferential3f(ray), weight
-
     # ------------------------------------------------------------------ particle tracing
     def sample_direction(self, it, sample, active=True):
         # Relative to the camera first (precision at large world offsets), then rotate.
@@ -398,28 +393,6 @@ class DistortedPinhole(mi.Sensor):
             ds.pdf = dr.select(active, dist * dist / (cos_t * math.pi * self._r_ap**2), 0.0)
         weight = dr.select(active, importance / (dist * dist), 0.0)
         return ds, mi.Spectrum(weight)
-
-    def pdf_direction(self, it, ds, active=True):
-        return mi.Float(0.0)
-
-    def eval_direction(self, it, ds, active=True):
-        return mi.Spectrum(0.0)
-
-    def sample_position(self, time, sample, active=True):
-        return dr.zeros(mi.PositionSample3f), mi.Float(0.0)
-
-    def pdf_position(self, ps, active=True):
-        return mi.Float(0.0)
-
-    def eval(self, si, active=True):
-        return mi.Spectrum(0.0)
-
-    def sample_wavelengths(self, si, sample, active=True):
-        return dr.zeros(mi.Color0f), mi.Spectrum(1.0)
-
-    def bbox(self):
-        p = self._pos
-        return mi.ScalarBoundingBox3f(p, p)
 
     def to_string(self):
         c = self.camera

@@ -92,22 +92,22 @@ import mitsuba as mi
 import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
+from mitpiv.physics.camera import _CV_TO_MI, PinholeCamera
 from mitpiv.physics.plenoptic import PRESETS, PlenopticCamera
 from mitpiv.render.plugins._props import PropertyReader, read_placement
+from mitpiv.render.plugins._sensor import MitpivSensor, film_resolution
 
 _VARIANT = mi.variant()
 
 
-class Plenoptic(mi.Sensor):
+class Plenoptic(MitpivSensor):
     """Plenoptic 1.0 sensor; see the module docstring for parameters."""
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
         rd = PropertyReader(props, "plenoptic")
         film = self.film()
-        w, h = (int(v) for v in film.size())
-        if tuple(film.crop_size()) != (w, h):
-            raise ConfigError("plenoptic: film crop windows are not supported; remove crop_*.")
+        w, h = film_resolution(self, "plenoptic")
         if film.rfilter().class_name() != "BoxFilter":
             raise ConfigError(
                 f"plenoptic: the film's reconstruction filter must be <rfilter type=\"box\"/> (a pixel integrates "
@@ -129,11 +129,8 @@ class Plenoptic(mi.Sensor):
         if placed is not None:
             self.m_to_world = mi.Transform4f(placed)
         to_world = np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4)
-        lin = to_world[:3, :3]
-        if not np.allclose(np.linalg.norm(lin, axis=0), 1.0, atol=1e-5) or np.linalg.det(lin) < 0:
-            raise ConfigError("plenoptic: to_world must be a rigid transform (rotation + translation, no scaling or mirroring).")
-        u_, _, vt = np.linalg.svd(lin)
-        to_world[:3, :3] = u_ @ vt
+        rotation, _ = PinholeCamera.rotation_from_mitsuba(to_world)  # rigid check; float32 snapped to a rotation
+        to_world[:3, :3] = rotation.T @ _CV_TO_MI
 
         kw = dict(base)
         for key in ("pixel_pitch_um", "focal_length_mm", "focus_distance_mm", "mla_pitch_um", "mla_focal_length_um",
@@ -310,10 +307,6 @@ class Plenoptic(mi.Sensor):
         ray.maxt = self.far_clip
         return ray, wav_weight * r["weight"]
 
-    def sample_ray_differential(self, time, sample1, sample2, sample3, active=True):
-        ray, weight = self.sample_ray(time, sample1, sample2, sample3, active)
-        return mi.RayDifferential3f(ray), weight
-
     @staticmethod
     def _hash(a, b):
         """A uniform decorrelated from the 2D samples a, b (TEA hash of their bits)."""
@@ -390,28 +383,6 @@ class Plenoptic(mi.Sensor):
         return {k: np.array(v) for k, v in r.items()}
 
     # ------------------------------------------------------------------ boilerplate
-    def pdf_direction(self, it, ds, active=True):
-        return mi.Float(0.0)
-
-    def eval_direction(self, it, ds, active=True):
-        return mi.Spectrum(0.0)
-
-    def sample_position(self, time, sample, active=True):
-        return dr.zeros(mi.PositionSample3f), mi.Float(0.0)
-
-    def pdf_position(self, ps, active=True):
-        return mi.Float(0.0)
-
-    def eval(self, si, active=True):
-        return mi.Spectrum(0.0)
-
-    def sample_wavelengths(self, si, sample, active=True):
-        return dr.zeros(mi.Color0f), mi.Spectrum(1.0)
-
-    def bbox(self):
-        p = self._pos
-        return mi.ScalarBoundingBox3f(p, p)
-
     def to_string(self):
         c = self.camera
         return (f"Plenoptic[resolution={c.resolution}, main lens {c.focal_length_mm} mm f/{c.f_number:.3g} focused at "
