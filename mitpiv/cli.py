@@ -1,4 +1,5 @@
-"""Command-line interface: ``mitpiv render``, ``info``, ``sensor``, ``decode`` and ``refocus``.
+"""Command-line interface: ``mitpiv render``, ``info``, ``sensor``, ``decode``, ``refocus``
+and ``reconstruct``.
 
 Thin: parses arguments, calls library functions, shows progress. Errors from mitpiv
 print as one line and exit with status 2.
@@ -120,6 +121,92 @@ def cmd_refocus(args) -> int:
     return 0
 
 
+RECONSTRUCT_METHODS = ("mlos", "mart", "smart", "sapiv", "plenoptic", "drt-mart")
+
+
+def _grid_from_args(args):
+    from mitpiv.reconstruct import VoxelGrid
+
+    b = args.bounds
+    return VoxelGrid.from_bounds((b[0], b[2], b[4]), (b[1], b[3], b[5]), args.voxel if len(args.voxel) == 3 else args.voxel[0])
+
+
+def cmd_reconstruct(args) -> int:
+    import time
+    from pathlib import Path
+
+    import numpy as np
+
+    from mitpiv import reconstruct as rc
+    from mitpiv.io import read_exr
+    from mitpiv.io.atomic import atomic_path
+    from mitpiv.render.render import write_preview
+
+    if len(args.voxel) not in (1, 3):
+        raise MitpivError(f"reconstruct: --voxel takes 1 (cubic) or 3 (dx dy dz) sizes in mm, got {len(args.voxel)}.")
+    out = Path(args.out)
+    if out.suffix != ".npz":
+        raise MitpivError(f"reconstruct: --out must be a .npz file, got {str(out)!r}.")
+    grid = _grid_from_args(args)
+    inputs = [read_exr(f) for f in args.images]
+    images = [img if img.ndim == 2 else img[..., 0] for img, _ in inputs]
+    metas = [m for _, m in inputs]
+    print(f"grid {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]} voxels of {grid.voxel_mm} mm, {len(images)} image(s), "
+          f"method {args.method}", file=sys.stderr)
+    t0 = time.perf_counter()
+    info = {}
+    if args.method in ("mlos", "mart", "smart", "sapiv"):
+        mappings = [rc.mapping_from_metadata(m) for m in metas]
+        if args.method == "mlos":
+            vol = rc.mlos(images, mappings, grid, interpolation=args.interpolation, progress=True)
+        elif args.method == "sapiv":
+            vol = rc.sapiv_refocus(images, mappings, grid, method=args.combine, interpolation=args.interpolation,
+                                   threshold_k=None if args.threshold_k < 0 else args.threshold_k, progress=True)
+        else:
+            vol, info = rc.mart(images, mappings, grid, iterations=args.iterations, mu=args.mu, smart=args.method == "smart",
+                                weights=args.weights, interpolation=args.interpolation, preprocess=args.preprocess,
+                                progress=True, return_info=True)
+    else:
+        from mitpiv.lightfield import decode
+        from mitpiv.lightfield.decode import optics_from_metadata
+
+        cams = [optics_from_metadata(m) for m in metas]
+        if any(c is None for c in cams):
+            raise MitpivError("reconstruct: plenoptic methods need raw EXRs rendered by a plenoptic sensor (camera metadata).")
+        if args.method == "drt-mart":
+            if len(images) != 1:
+                raise MitpivError(f"reconstruct: drt-mart takes one raw image, got {len(images)}.")
+            vol, info = rc.drt_mart(images[0], cams[0], grid, iterations=args.iterations, mu=args.mu,
+                                    rays_per_pixel=args.rays_per_pixel, progress=True, return_info=True)
+        else:
+            whites = args.white or [None] * len(images)
+            if len(whites) != len(images):
+                raise MitpivError(f"reconstruct: give one --white per image ({len(images)}), got {len(whites)}.")
+            vols = [rc.plenoptic_volume(decode(img, optics=c, white=w), grid, method=args.combine)
+                    for img, c, w in zip(images, cams, whites, strict=True)]
+            vol = vols[0] if len(vols) == 1 else rc.fuse(vols)
+    elapsed = time.perf_counter() - t0
+    metrics = {}
+    if args.truth:
+        from mitpiv import analysis
+        from mitpiv.io import read_truth
+
+        truth = analysis.truth_volume(read_truth(args.truth)["positions_mm"][args.frame], grid)
+        metrics = {"Q": analysis.quality_q(vol, truth), "Q*": analysis.quality_q_zero_mean(vol, truth),
+                   "Q'": analysis.rank_correlation(vol, truth), "SNR": analysis.plane_snr(vol)}
+    record = {"method": args.method, "images": [str(f) for f in args.images], "grid": grid.to_dict(),
+              "seconds": elapsed, "metrics": metrics,
+              "info": {k: v for k, v in info.items() if isinstance(v, int | float | str | list)}}
+    with atomic_path(out, suffix=".npz") as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, volume=vol, meta=json.dumps(record))
+    write_preview(out.with_suffix(".png"), np.asarray(vol).max(axis=0))
+    print(f"volume {vol.shape} ({args.method}, {elapsed:.1f} s) -> {out} (+ max projection {out.with_suffix('.png')})")
+    for k, v in metrics.items():
+        print(f"  {k:4s} {v:.4f}")
+    return 0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="mitpiv", description="Physically based rendering testbed for volumetric PIV.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -170,6 +257,26 @@ def main(argv=None) -> int:
     f.add_argument("--magnification", choices=["natural", "constant"], default="natural")
     f.add_argument("--white", default=None, help="white EXR (raw-EXR input only)")
     f.set_defaults(func=cmd_refocus)
+    c = sub.add_parser("reconstruct", help="reconstruct a volume from camera EXRs (tomographic, SAPIV or plenoptic)")
+    c.add_argument("images", nargs="+", help="EXR images with camera metadata (one per camera)")
+    c.add_argument("--out", required=True, help="output .npz (volume (n_z, n_y, n_x) + JSON meta)")
+    c.add_argument("--method", choices=RECONSTRUCT_METHODS, default="mart")
+    c.add_argument("--bounds", type=float, nargs=6, required=True, metavar=("XMIN", "XMAX", "YMIN", "YMAX", "ZMIN", "ZMAX"),
+                   help="volume [mm]")
+    c.add_argument("--voxel", type=float, nargs="+", required=True, help="voxel size [mm]: one (cubic) or three (dx dy dz)")
+    c.add_argument("--iterations", type=int, default=5)
+    c.add_argument("--mu", type=float, default=1.0, help="MART relaxation (0, 2)")
+    c.add_argument("--weights", choices=["circle", "gaussian"], default="circle")
+    c.add_argument("--interpolation", choices=["linear", "cubic"], default="linear")
+    c.add_argument("--preprocess", type=float, default=None, metavar="K", help="histogram threshold: background + K sigma")
+    c.add_argument("--combine", choices=["additive", "multiplicative"], default="multiplicative",
+                   help="sapiv / plenoptic combination")
+    c.add_argument("--threshold-k", type=float, default=3.0, help="sapiv: keep mean + k sigma per plane (< 0: none)")
+    c.add_argument("--white", nargs="+", default=None, help="plenoptic: white EXR per image")
+    c.add_argument("--rays-per-pixel", type=int, default=16, help="drt-mart ray bundle per pixel")
+    c.add_argument("--truth", default=None, help="truth .npz: print Q, Q*, Q' and SNR")
+    c.add_argument("--frame", type=int, default=0, help="truth frame of the images")
+    c.set_defaults(func=cmd_reconstruct)
     args = p.parse_args(argv)
     try:
         return args.func(args)

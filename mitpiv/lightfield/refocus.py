@@ -20,7 +20,6 @@ estimated from a few views. The kernels run in parallel over output rows (Numba)
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 from contextlib import contextmanager
@@ -28,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mitpiv._numba import numba
 from mitpiv.errors import ConfigError
 from mitpiv.io.atomic import atomic_path
 from mitpiv.lightfield.decode import LightField
@@ -40,20 +40,13 @@ _MAX_IN_MEMORY = 2 * 1024**3  # bytes: larger stacks must stream to a file
 _EPS = 1e-6  # grid units: samples this close outside the border count as on it
 
 
-def _numba():
-    os.environ.setdefault("NUMBA_CACHE_DIR", str(Path.home() / ".cache" / "mitpiv" / "numba"))
-    import numba
-
-    return numba
-
-
 _KERNELS = {}
 
 
 def _kernels():
     if _KERNELS:
         return _KERNELS
-    nb = _numba()
+    nb = numba()
 
     @nb.njit(inline="always", cache=True)
     def on_grid(x, n):

@@ -33,10 +33,10 @@ import functools
 import math
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
+from mitpiv._numba import set_cache_dir
 from mitpiv.errors import ConfigError, MitpivError
 
 __all__ = [
@@ -66,7 +66,7 @@ MIN_SIZE_PARAMETER = 1e-6
 def _engine():
     """Import miepython with numba switched on (first import compiles: seconds, then cached)."""
     os.environ.setdefault("MIEPYTHON_USE_JIT", "1")
-    os.environ.setdefault("NUMBA_CACHE_DIR", str(Path.home() / ".cache" / "mitpiv" / "numba"))
+    set_cache_dir()
     import miepython
 
     return miepython

@@ -440,6 +440,61 @@ class PlenopticCamera:
             to_world_mitsuba=np.asarray(d["to_world_mitsuba"]),
         )
 
+    # ------------------------------------------------------------------ rays (float64)
+    def nearest_lenslet(self, xy_mm) -> tuple[np.ndarray, np.ndarray]:
+        """Axial lattice indices (i, j) of the lenslet whose cell holds MLA-plane points (..., 2) [mm]."""
+        xy = np.asarray(xy_mm, dtype=float)
+        f = (xy - self.origin_mm) @ np.linalg.inv(self.basis_mm)
+        if self.mla_layout == "rect":
+            return np.floor(f[..., 0] + 0.5).astype(np.int64), np.floor(f[..., 1] + 0.5).astype(np.int64)
+        i0, j0 = np.floor(f[..., 0]).astype(np.int64), np.floor(f[..., 1]).astype(np.int64)
+        best = np.full(xy.shape[:-1], np.inf)
+        bi, bj = i0.copy(), j0.copy()
+        for di, dj in ((0, 0), (1, 0), (0, 1), (1, 1)):
+            c = self.origin_mm + (i0 + di)[..., None] * self.basis_mm[0] + (j0 + dj)[..., None] * self.basis_mm[1]
+            d = np.sum((xy - c) ** 2, axis=-1)
+            better = d < best
+            bi, bj, best = np.where(better, i0 + di, bi), np.where(better, j0 + dj, bj), np.where(better, d, best)
+        return bi, bj
+
+    def lenslet_exists(self, i, j) -> np.ndarray:
+        col, row = self.axial_to_storage(i, j)
+        return (col >= 0) & (col < self.mla_count[0]) & (row >= 0) & (row < self.mla_count[1])
+
+    def camera_rays(self, uv_px, cell_uv) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """World rays of sensor points through points of their own lenslet (float64).
+
+        The NumPy counterpart of the ``plenoptic`` sensor's camera path, without crosstalk:
+        sensor point ``P`` (pixel coordinates ``uv_px``) -> the lenslet whose image holds it
+        -> the lenslet point ``c + d``, ``d`` the cell point ``cell_uv`` in [0, 1)^2 of the
+        lattice parallelogram (folded onto the hexagonal cell) -> main lens.
+
+        Returns
+        -------
+        origins (..., 3) on the main lens [mm, world], unit directions (..., 3) [world],
+        valid (...) bool: the lenslet exists and the ray passes the aperture.
+        """
+        uv = np.asarray(uv_px, dtype=float)
+        cu = np.asarray(cell_uv, dtype=float)
+        p = self.px_to_sensor_mm(uv)
+        i, j = self.nearest_lenslet(p / self.image_scale)
+        b = self.basis_mm
+        c = self.origin_mm + i[..., None] * b[0] + j[..., None] * b[1]
+        d = (cu[..., 0:1] - 0.5) * b[0] + (cu[..., 1:2] - 0.5) * b[1]
+        if self.mla_layout == "hex":  # fold the parallelogram onto the hexagonal cell
+            ni, nj = self.nearest_lenslet(c + d)
+            d = d - (ni - i)[..., None] * b[0] - (nj - j)[..., None] * b[1]
+        g, fm, si, f = self.gap_mm, self.mla_focal_length_um * 1e-3, self.image_distance_mm, self.focal_length_mm
+        t2 = (c + d - p) / g - d / fm
+        lens = c + d + si * t2
+        inside = np.sum(lens * lens, axis=-1) <= self.aperture_radius_mm**2
+        t3 = t2 - lens / f
+        m = self.to_world_mitsuba
+        origins = m[:3, 3] + np.concatenate([lens, np.zeros(lens.shape[:-1] + (1,))], axis=-1) @ m[:3, :3].T
+        dirs = np.concatenate([t3, np.ones(t3.shape[:-1] + (1,))], axis=-1) @ m[:3, :3].T
+        dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+        return origins, dirs, self.lenslet_exists(i, j) & inside
+
     # ------------------------------------------------------------------ pose
     def world_to_local(self, p_world) -> np.ndarray:
         """World points (..., 3) -> camera-local (Mitsuba frame, lens at the origin)."""

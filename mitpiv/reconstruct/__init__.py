@@ -1,7 +1,10 @@
-"""Reconstruction inputs: camera mappings and their calibration (NumPy/OpenCV, no renderer).
+"""Volumetric reconstruction (NumPy/SciPy/Numba, no renderer) and its inputs.
 
-``calibrate`` fits a mapping to marker correspondences; mappings have ``project()`` and
-``jacobian()``; ``mapping_from_metadata`` gives the true model of a rendered image.
+Camera mappings and calibration: ``calibrate`` fits a mapping to marker correspondences;
+mappings have ``project()`` and ``jacobian()``; ``mapping_from_metadata`` gives the true
+model of a rendered image. Reconstructions on a :class:`VoxelGrid`: ``mlos``, ``mart``
+(MART / SMART), ``sapiv_refocus`` (camera arrays), ``plenoptic_volume``, ``fuse``
+(multi-plenoptic) and ``drt_mart`` (dense-ray-tracing MART of a raw light-field image).
 """
 
 from mitpiv.reconstruct.calibration import (
@@ -13,6 +16,7 @@ from mitpiv.reconstruct.calibration import (
     label_markers,
     plane_homographies,
 )
+from mitpiv.reconstruct.grid import VoxelGrid
 from mitpiv.reconstruct.mapping import CameraMapping, PinholeMapping, PolynomialMapping, mapping_from_metadata
 
 __all__ = [
@@ -28,3 +32,8 @@ __all__ = [
     "PolynomialMapping",
     "mapping_from_metadata",
 ]
+from mitpiv.reconstruct.plenoptic import drt_mart, drt_weights, fuse, plenoptic_volume  # noqa: E402
+from mitpiv.reconstruct.tomo import mart, mlos, preprocess_images, sapiv_refocus, voxel_weights  # noqa: E402
+
+__all__ += ["VoxelGrid", "mlos", "mart", "sapiv_refocus", "preprocess_images", "voxel_weights", "plenoptic_volume",
+            "fuse", "drt_weights", "drt_mart"]

@@ -40,6 +40,11 @@ class CameraMapping(ABC):
     def jacobian(self, p_world) -> np.ndarray:
         """d(pixel)/d(world), (..., 2, 3) [px/mm]."""
 
+    def visible(self, p_world) -> np.ndarray:
+        """Whether world points (..., 3) lie in front of the camera (all True for a mapping
+        that does not know where its camera is, such as a fitted polynomial)."""
+        return np.ones(np.shape(p_world)[:-1], dtype=bool)
+
     def residuals(self, pixels, p_world) -> np.ndarray:
         """Reprojection error vectors [px]: project(world) - pixels."""
         return self.project(p_world) - np.asarray(pixels, dtype=float)
@@ -58,6 +63,11 @@ class PinholeMapping(CameraMapping):
 
     def project(self, p_world) -> np.ndarray:
         return self.camera.project(p_world)
+
+    def visible(self, p_world) -> np.ndarray:
+        """Points in front of the pinhole (camera-frame z > 0); the projection of a point
+        behind it lands on the image mirrored, so reconstructions must leave it out."""
+        return self.camera.world_to_camera(p_world)[..., 2] > 0
 
     def jacobian(self, p_world) -> np.ndarray:
         c = self.camera

@@ -1,0 +1,277 @@
+"""Plenoptic reconstructions: single-camera volumetric refocusing, multi-camera fusion and
+dense-ray-tracing MART (DRT-MART) from a raw light-field image.
+
+* :func:`plenoptic_volume`: refocusing of a decoded light field onto the world voxel grid
+  (:func:`mitpiv.lightfield.refocus_volume`), additive, or the multiplicative MLOS form
+  ``E = (prod_uv L_uv^w(u,v))^(exponent / sum w)`` with white-image weights ``w(u,v)``.
+* :func:`fuse`: multi-plenoptic fusion (Fahringer & Thurow): each camera's volume
+  normalised by a normal fit of its histogram, then ``(prod_m V_m)^(1/M)``.
+* :func:`drt_mart`: every raw pixel's ray bundle traced through its lenslet and the main
+  lens (:meth:`PlenopticCamera.camera_rays`) into the grid; the weight of voxel ``j`` for
+  pixel ``i`` is the fraction of the bundle crossing it (per grid slab along the camera's
+  main viewing axis, ``substeps`` samples per slab); MART on the resulting sparse matrix.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import numpy as np
+
+from mitpiv.errors import ConfigError
+from mitpiv.lightfield.decode import LightField
+from mitpiv.lightfield.refocus import refocus_volume
+from mitpiv.physics.plenoptic import PlenopticCamera
+from mitpiv.reconstruct._kernels import kernels
+from mitpiv.reconstruct.grid import VoxelGrid
+
+__all__ = ["plenoptic_volume", "fuse", "drt_weights", "drt_mart", "FUSE_NORMALISATIONS"]
+
+FUSE_NORMALISATIONS = ("histogram", "max", "none")
+
+
+def plenoptic_volume(lf: LightField, grid: VoxelGrid, *, method: str = "additive", weights=None,
+                     exponent: float = 1.0, min_view_fraction: float = 0.5, progress: bool = False) -> np.ndarray:
+    """Volumetric refocus of one plenoptic camera's light field onto ``grid``.
+
+    Parameters
+    ----------
+    lf : LightField
+        Decoded light field carrying its optics and pose (``lf.optics``).
+    grid : VoxelGrid
+    method : "additive" | "multiplicative"
+        additive: the view-weighted mean of the sub-aperture samples of each voxel;
+        multiplicative: their weighted geometric mean raised to ``exponent`` (log space; a
+        voxel some view sees as dark is zero).
+    weights : (n_v, n_u) array, optional
+        View weights ``w(u, v)`` (default the white-image weights ``lf.view_weights``).
+    exponent : float > 0
+        Rescaling exponent of the multiplicative form (1: geometric mean, intensity units;
+        ``sum w``: the plain weighted product).
+    min_view_fraction : float
+        Voxels reached by less than this fraction of the view weight are zero.
+
+    Returns
+    -------
+    (n_z, n_y, n_x) float32 volume
+    """
+    if not isinstance(lf, LightField):
+        raise ConfigError(f"plenoptic_volume: 'lf' must be a LightField (mitpiv.lightfield.decode), got {type(lf).__name__}.")
+    if not isinstance(grid, VoxelGrid):
+        raise ConfigError(f"plenoptic_volume: 'grid' must be a VoxelGrid, got {type(grid).__name__}.")
+    if not (np.isfinite(exponent) and exponent > 0):
+        raise ConfigError(f"plenoptic_volume: 'exponent' must be finite and > 0, got {exponent!r}.")
+    vol = refocus_volume(lf, grid.x_mm, grid.y_mm, grid.z_mm, method=method, weights=weights,
+                         min_view_fraction=min_view_fraction, progress=progress)
+    if method == "multiplicative" and exponent != 1.0:
+        vol = np.power(vol, exponent, dtype=np.float64).astype(np.float32)
+    return vol
+
+
+def _normal_fit(v):
+    return float(v.mean()), float(v.std())
+
+
+def fuse(volumes, *, normalise: str = "histogram") -> np.ndarray:
+    """Fuse the volumes of several (plenoptic) cameras on one grid: ``(prod_m V_m')^(1/M)``.
+
+    Parameters
+    ----------
+    volumes : sequence of M arrays, same shape, >= 0
+    normalise : "histogram" | "max" | "none"
+        histogram: each volume's voxel histogram fitted by a normal distribution (maximum
+        likelihood: mean ``mu``, std ``sigma``) and mapped to ``max(V - mu, 0) / sigma``,
+        its signal in units of its own spread above its mean level, so cameras of different
+        brightness weigh equally; max: divided by its maximum; none: as given.
+
+    Returns
+    -------
+    float32 volume (computed in log space: a voxel any camera leaves at zero is zero).
+    """
+    if normalise not in FUSE_NORMALISATIONS:
+        raise ConfigError(f"fuse: 'normalise' must be one of {FUSE_NORMALISATIONS}, got {normalise!r}.")
+    vols = [np.asarray(v, dtype=np.float64) for v in volumes]
+    if len(vols) == 0:
+        raise ConfigError("fuse: no volumes given.")
+    for m, v in enumerate(vols):
+        if v.shape != vols[0].shape:
+            raise ConfigError(f"fuse: volumes[{m}] has shape {v.shape}, volumes[0] {vols[0].shape}; reconstruct all on one grid.")
+        if not np.all(np.isfinite(v)) or np.any(v < 0):
+            raise ConfigError(f"fuse: volumes[{m}] must be finite and >= 0.")
+    acc = np.zeros(vols[0].shape)
+    for v in vols:
+        if normalise == "histogram":
+            mu, sigma = _normal_fit(v)
+            v = np.maximum(v - mu, 0.0) / sigma if sigma > 0 else np.zeros_like(v)
+        elif normalise == "max":
+            v = v / v.max() if v.max() > 0 else v
+        with np.errstate(divide="ignore"):
+            acc += np.log(v)
+    return np.exp(acc / len(vols)).astype(np.float32)
+
+
+# ---------------------------------------------------------------------- DRT-MART
+def _check_camera(camera, what):
+    if isinstance(camera, dict):
+        camera = PlenopticCamera.from_dict(camera.get("plenoptic", camera))
+    if not isinstance(camera, PlenopticCamera):
+        raise ConfigError(f"{what}: 'camera' must be a PlenopticCamera (or its metadata dict), got {type(camera).__name__}.")
+    return camera
+
+
+def drt_weights(camera: PlenopticCamera, grid: VoxelGrid, *, rays_per_pixel: int = 16, substeps: int = 2,
+                pixels=None, seed: int = 0, chunk_pixels: int = 2048, progress: bool = False):
+    """Dense-ray-tracing weights of a plenoptic camera: ``scipy.sparse.csr_matrix`` (pixels x voxels).
+
+    Entry ``(i, j)``: the fraction of pixel ``i``'s ``rays_per_pixel`` rays (uniform over
+    the pixel and its lenslet's cell, seeded) that pass the main-lens aperture and cross
+    voxel ``j``, counted per slab of the grid axis closest to the camera's optical axis
+    with ``substeps`` samples per slab. Row ``v * W + u`` is pixel ``(u, v)``; column the
+    flat voxel index.
+
+    Parameters
+    ----------
+    pixels : (n,) int, optional
+        Flat pixel indices to trace (default all); the other rows stay empty.
+    """
+    from scipy.sparse import csr_matrix
+
+    cam = _check_camera(camera, "drt_weights")
+    for name, val in (("rays_per_pixel", rays_per_pixel), ("substeps", substeps), ("chunk_pixels", chunk_pixels)):
+        if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < 1:
+            raise ConfigError(f"drt_weights: '{name}' must be a positive integer, got {val!r}.")
+    w, h = cam.resolution
+    pix = np.arange(w * h) if pixels is None else np.asarray(pixels, dtype=np.int64).ravel()
+    axis = int(np.argmax(np.abs(cam.to_world_mitsuba[:3, 2])))  # grid axis nearest the optical axis
+    others = [a for a in range(3) if a != axis]
+    nz, ny, nx = grid.shape
+    n_ax = (nx, ny, nz)
+    org, vox = np.asarray(grid.origin_mm), np.asarray(grid.voxel_mm)
+    # sample coordinates along the stepping axis (slab centres subdivided)
+    planes = org[axis] + (np.arange(n_ax[axis] * substeps) + 0.5) * vox[axis] / substeps
+    rng = np.random.default_rng(seed)
+    keys, vals = [], []
+    share = 1.0 / (rays_per_pixel * substeps)
+    t0 = time.perf_counter()
+    for s in range(0, len(pix), chunk_pixels):
+        pc = pix[s : s + chunk_pixels]
+        uv = np.stack([pc % w, pc // w], -1)[:, None, :] + rng.random((len(pc), rays_per_pixel, 2))
+        o, d, ok = cam.camera_rays(uv, rng.random((len(pc), rays_per_pixel, 2)))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (planes[None, None, :] - o[..., axis : axis + 1]) / d[..., axis : axis + 1]
+        good = ok[..., None] & (t > 0)
+        idx = [None, None, None]
+        idx[axis] = np.broadcast_to(np.arange(len(planes)) // substeps, t.shape)
+        for a in others:
+            q = np.floor((o[..., a : a + 1] + t * d[..., a : a + 1] - org[a]) / vox[a])
+            good &= (q >= 0) & (q < n_ax[a])
+            idx[a] = q
+        flat_vox = ((idx[2] * ny + idx[1]) * nx + idx[0])[good].astype(np.int64)
+        row = np.broadcast_to(pc[:, None, None], t.shape)[good]
+        key = row * grid.n_voxels + flat_vox
+        uk, cnt = np.unique(key, return_counts=True)
+        keys.append(uk)
+        vals.append((cnt * share).astype(np.float32))
+        if progress and ((s // chunk_pixels) % 20 == 19 or s + chunk_pixels >= len(pix)):
+            print(f"drt_weights: {min(s + chunk_pixels, len(pix))}/{len(pix)} pixels, {time.perf_counter() - t0:.1f} s",
+                  file=sys.stderr, flush=True)
+    key = np.concatenate(keys) if keys else np.zeros(0, np.int64)
+    val = np.concatenate(vals) if vals else np.zeros(0, np.float32)
+    order = np.argsort(key, kind="stable")  # chunks may interleave when 'pixels' is unsorted
+    key, val = key[order], val[order]
+    rows, cols = key // grid.n_voxels, (key % grid.n_voxels).astype(np.int32)
+    indptr = np.zeros(w * h + 1, np.int64)
+    np.cumsum(np.bincount(rows, minlength=w * h), out=indptr[1:])
+    return csr_matrix((val, cols, indptr), shape=(w * h, grid.n_voxels))
+
+
+def drt_mart(raw, camera: PlenopticCamera, grid: VoxelGrid, *, iterations: int = 5, mu: float = 1.0,
+             rays_per_pixel: int = 16, substeps: int = 2, prune_fraction: float | None = 0.5, dark_floor: float = 1e-3,
+             matrix=None, seed: int = 0, progress: bool = False, return_info: bool = False):
+    """Dense-ray-tracing MART of one raw plenoptic image.
+
+    Parameters
+    ----------
+    raw : (H, W) array
+        Raw sensor image (values >= 0; negatives are clipped).
+    camera : PlenopticCamera
+        Its optics and pose (e.g. ``PlenopticCamera.from_dict(meta["plenoptic"])``).
+    grid : VoxelGrid
+    iterations, mu
+        MART sweeps over the pixels and relaxation in (0, 2).
+    rays_per_pixel, substeps
+        Ray-bundle sampling (see :func:`drt_weights`).
+    prune_fraction : float in [0, 1] or None
+        Dark-pixel pruning: a voxel that takes more than this fraction of its total weight
+        from dark (zero) pixels is zero and dropped from the system (0: any dark pixel
+        removes it, as MART's zero-pixel rule does; None: no pruning). Geometric ray
+        bundles of point particles do not fill whole voxels, so the strict rule also
+        removes voxels that hold a particle; 0.5 keeps them.
+    dark_floor : float >= 0
+        The remaining dark pixels are raised to ``dark_floor * max(raw)`` so they scale
+        the voxels they see down instead of zeroing them (0: strict MART zeroing).
+    matrix : csr_matrix, optional
+        Weights from an earlier :func:`drt_weights` call on the same camera and grid.
+
+    Returns
+    -------
+    (n_z, n_y, n_x) float32 volume, or ``(volume, info)`` with the matrix size, voxel
+    updates per second and timings.
+    """
+    cam = _check_camera(camera, "drt_mart")
+    if not isinstance(grid, VoxelGrid):
+        raise ConfigError(f"drt_mart: 'grid' must be a VoxelGrid, got {type(grid).__name__}.")
+    img = np.asarray(raw, dtype=np.float64)
+    w, h = cam.resolution
+    if img.shape != (h, w):
+        raise ConfigError(f"drt_mart: 'raw' has shape {img.shape}; the camera's sensor is {h}x{w} (H, W).")
+    if not np.all(np.isfinite(img)):
+        raise ConfigError("drt_mart: 'raw' contains NaN or infinite pixels.")
+    if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or iterations < 0:
+        raise ConfigError(f"drt_mart: 'iterations' must be an integer >= 0, got {iterations!r}.")
+    if not (np.isfinite(mu) and 0 < mu < 2):
+        raise ConfigError(f"drt_mart: relaxation 'mu' must lie in (0, 2), got {mu!r}.")
+    if prune_fraction is not None and not (0 <= prune_fraction <= 1):
+        raise ConfigError(f"drt_mart: 'prune_fraction' must lie in [0, 1] or be None, got {prune_fraction!r}.")
+    if not (np.isfinite(dark_floor) and 0 <= dark_floor < 1):
+        raise ConfigError(f"drt_mart: 'dark_floor' must lie in [0, 1), got {dark_floor!r}.")
+    flat = np.ascontiguousarray(np.maximum(img, 0.0).ravel())
+    t0 = time.perf_counter()
+    if matrix is None:
+        matrix = drt_weights(cam, grid, rays_per_pixel=rays_per_pixel, substeps=substeps, seed=seed, progress=progress)
+    elif matrix.shape != (w * h, grid.n_voxels):
+        raise ConfigError(f"drt_mart: 'matrix' has shape {matrix.shape}; this camera and grid need {(w * h, grid.n_voxels)}.")
+    t_weights = time.perf_counter() - t0
+    total = np.bincount(matrix.indices, weights=matrix.data, minlength=grid.n_voxels)
+    seen = np.flatnonzero(total > 0)
+    live = seen
+    if prune_fraction is not None:
+        dark = matrix[flat <= 0.0]
+        from_dark = np.bincount(dark.indices, weights=dark.data, minlength=grid.n_voxels)
+        frac = from_dark[seen] / total[seen]
+        live = seen[(frac <= prune_fraction) if prune_fraction > 0 else (from_dark[seen] == 0)]
+    if dark_floor > 0 and flat.max() > 0:
+        flat = np.maximum(flat, dark_floor * flat.max())
+    a = matrix[:, live].tocsr()
+    a.sort_indices()
+    indptr, indices, data = a.indptr.astype(np.int64), a.indices.astype(np.int32), a.data.astype(np.float32)
+    vol = np.ones(len(live))
+    k = kernels()
+    t1 = time.perf_counter()
+    for it in range(iterations):
+        k["mart_sequential"](indptr, indices, data, flat, vol, float(mu))
+        if progress:
+            print(f"drt_mart: iteration {it + 1}/{iterations}, {time.perf_counter() - t1:.1f} s", file=sys.stderr, flush=True)
+    t_iter = time.perf_counter() - t1
+    out = np.zeros(grid.n_voxels, np.float32)
+    out[live] = vol
+    out = out.reshape(grid.shape)
+    if not return_info:
+        return out
+    info = {"weight_entries": int(matrix.nnz), "active_entries": int(a.nnz), "active_voxels": int(len(live)),
+            "voxels_seen": int(len(seen)), "weights_s": t_weights, "iterate_s": t_iter,
+            "voxel_updates_per_s": (a.nnz * iterations / t_iter) if t_iter > 0 and iterations else math.nan,
+            "weight_bytes": int(matrix.data.nbytes + matrix.indices.nbytes + matrix.indptr.nbytes)}
+    return out, info

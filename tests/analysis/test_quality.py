@@ -1,0 +1,124 @@
+"""Reconstruction-quality metrics: Q, Q*, rank Q', plane SNR and the true intensity volume.
+
+References: the definitions recomputed here in float64 and scipy.stats.spearmanr /
+pearsonr (a peer implementation) for the rank and zero-mean correlations.
+"""
+
+import numpy as np
+import pytest
+from scipy.stats import pearsonr, spearmanr
+
+from mitpiv.analysis import plane_snr, quality_q, quality_q_zero_mean, rank_correlation, truth_volume
+from mitpiv.errors import ConfigError
+from mitpiv.reconstruct import VoxelGrid
+
+GRID = VoxelGrid.from_bounds((0, 0, 0), (40, 40, 20), 1.0)
+LO, HI = (0, 0, 0), (40, 40, 20)
+
+
+def blobs(n, seed):
+    return truth_volume(np.random.default_rng(seed).uniform(LO, HI, (n, 3)), GRID)
+
+
+def test_truth_with_itself_is_one():
+    t = blobs(100, 0)
+    assert quality_q(t, t) == pytest.approx(1.0, abs=1e-12)
+    assert quality_q_zero_mean(t, t) == pytest.approx(1.0, abs=1e-12)
+    assert rank_correlation(t, t) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_metrics_against_float64_formulas_and_scipy():
+    rng = np.random.default_rng(1)
+    a, b = blobs(80, 2), blobs(80, 2) + 0.05 * rng.random(GRID.shape)
+    assert quality_q(a, b) == pytest.approx(np.sum(a * b) / np.sqrt(np.sum(a * a) * np.sum(b * b)), rel=1e-12)
+    assert quality_q_zero_mean(a, b) == pytest.approx(pearsonr(a.ravel(), b.ravel())[0], rel=1e-9)
+    # many tied zeros in `a`: average ranks, as scipy's spearmanr
+    assert rank_correlation(a, b) == pytest.approx(spearmanr(a.ravel(), b.ravel())[0], rel=1e-9)
+
+
+def test_q_star_falls_with_ghosts_while_q_stays_high_at_dense_seeding():
+    """Ghost particles (false blobs) added at a 0.5x, 1x, 2x ratio: Q* falls steadily; at dense
+    seeding (0.06 particles per voxel) Q stays above 0.8 with twice as many ghosts as particles."""
+    for n, q_floor in ((50, None), (2000, 0.8)):
+        t = blobs(n, 3)
+        qs, qstars = [], []
+        for ratio in (0, 0.5, 1, 2):
+            rec = t + (blobs(int(ratio * n), 4 + int(2 * ratio)) if ratio else 0)
+            qs.append(quality_q(rec, t))
+            qstars.append(quality_q_zero_mean(rec, t))
+        assert np.all(np.diff(qstars) < -0.05), qstars
+        if q_floor:
+            assert qs[-1] > q_floor and qs[-1] - qstars[-1] > 0.2, (qs, qstars)
+
+
+def test_rank_correlation_is_invariant_to_monotonic_maps():
+    t = blobs(60, 5)
+    rec = t + 0.1 * blobs(30, 6)
+    r0 = rank_correlation(rec, t)
+    for f in (np.sqrt, lambda x: np.exp(3 * x), lambda x: x**3 + 2 * x):
+        assert rank_correlation(f(rec), t) == pytest.approx(r0, abs=1e-12)
+        assert rank_correlation(rec, f(t)) == pytest.approx(r0, abs=1e-12)
+    assert abs(quality_q(rec**3, t) - quality_q(rec, t)) > 0.01  # Q is not invariant
+
+
+def test_plane_snr_noise_versus_particles():
+    rng = np.random.default_rng(7)
+    noise = rng.random(GRID.shape)
+    # uniform noise: max / (mean + std) -> 1 / (0.5 + 1/sqrt(12)) = 1.268 per plane
+    assert plane_snr(noise) == pytest.approx(1 / (0.5 + 1 / np.sqrt(12)), rel=0.01)
+    parts = blobs(100, 8) + 0.01 * noise
+    s = plane_snr(parts)
+    assert s > 5 * plane_snr(noise)
+    assert plane_snr(parts, reference=noise) == pytest.approx(s / plane_snr(noise), rel=1e-12)
+    assert plane_snr(parts, reference=2.0) == pytest.approx(s / 2.0)
+    # planes along another axis
+    assert plane_snr(np.moveaxis(parts, 0, 2), axis=2) == pytest.approx(s, rel=1e-12)
+
+
+def test_truth_volume_conserves_intensity_and_centroid():
+    """Voxel-integrated blobs: total = intensity, centroid = position, and the discrete variance
+    = sigma^2 + 1/12 voxel^2 (Sheppard's correction), per axis on an anisotropic grid."""
+    g = VoxelGrid.from_bounds((-3, -3, -6), (3, 3, 6), (0.2, 0.3, 0.5))
+    p = np.array([[0.137, -0.211, 0.73]])
+    for sig in (0.7, (0.7, 1.0, 1.5)):
+        v = truth_volume(p, g, sigma_voxels=sig, intensities=[2.5])
+        assert v.sum() == pytest.approx(2.5, rel=2e-4)  # +-4 sigma support keeps 1 - 3 x 6.3e-5
+        s = np.broadcast_to(sig, (3,))
+        for axis, coords, d, si in ((2, g.x_mm, 0.2, s[0]), (1, g.y_mm, 0.3, s[1]), (0, g.z_mm, 0.5, s[2])):
+            prof = v.sum(axis=tuple(a for a in range(3) if a != axis))
+            mean = np.sum(prof * coords) / prof.sum()
+            var = np.sum(prof * (coords - mean) ** 2) / prof.sum()
+            assert mean == pytest.approx(p[0, 2 - axis], abs=1e-4)
+            assert var == pytest.approx((si * d) ** 2 + d**2 / 12, rel=1e-3)
+    # a particle half outside the grid keeps only its inside half
+    edge = truth_volume(np.array([[-3.0, 0.0, 0.0]]), g)
+    assert edge.sum() == pytest.approx(0.5, abs=0.01)
+
+
+def test_empty_volumes_give_zero_not_nan():
+    z = np.zeros(GRID.shape)
+    t = blobs(10, 9)
+    for f in (quality_q, quality_q_zero_mean, rank_correlation):
+        assert f(z, t) == 0.0
+        assert f(np.full(GRID.shape, 3.0), t) == (pytest.approx(quality_q(np.ones(GRID.shape), t)) if f is quality_q else 0.0)
+    assert plane_snr(z) == 0.0
+
+
+def test_bad_input():
+    t = blobs(5, 10)
+    with pytest.raises(ConfigError, match="shape"):
+        quality_q(t, t[:-1])
+    bad = t.copy()
+    bad[0, 0, 0] = np.nan
+    with pytest.raises(ConfigError, match="NaN"):
+        quality_q_zero_mean(bad, t)
+    with pytest.raises(ConfigError, match="sigma_voxels"):
+        truth_volume(np.zeros((1, 3)), GRID, sigma_voxels=0)
+    with pytest.raises(ConfigError, match="positions"):
+        truth_volume(np.zeros((2, 5, 3)), GRID)
+    with pytest.raises(ConfigError, match="reference"):
+        plane_snr(t, reference=np.zeros(GRID.shape))
+    with pytest.raises(ConfigError, match="upper_mm"):
+        VoxelGrid.from_bounds((0, 0, 0), (1, -1, 1), 0.1)
+    with pytest.raises(ConfigError, match="voxel_mm"):
+        VoxelGrid((0, 0, 0), (0.1, 0, 0.1), (2, 2, 2))
