@@ -23,6 +23,7 @@ bench: setup
 	$(PY) bench/bench_mie.py
 	$(PY) bench/bench_optics.py
 	$(PY) bench/bench_lightfield.py
+	$(PY) bench/bench_reconstruct.py
 
 clean:
 	rm -rf out .pytest_cache
