@@ -28,8 +28,7 @@ sys.path.insert(0, str(ROOT))
 from mitpiv import analysis as an  # noqa: E402
 from mitpiv import reconstruct as rc  # noqa: E402
 from mitpiv.physics.camera import PinholeCamera, scatter_arrangement  # noqa: E402
-from mitpiv.reconstruct._kernels import kernels  # noqa: E402
-from mitpiv.reconstruct.tomo import _build_weights, _footprints  # noqa: E402
+from mitpiv.reconstruct.tomo import _build_weights, _footprints, smart_sweep  # noqa: E402
 
 OUT = ROOT / "out" / "bench"
 
@@ -119,7 +118,6 @@ def scipy_baseline(cams, imgs, grid, iterations=5):
         mats.append((cw, csr_matrix((cw.data, cw.indices, cw.indptr), shape=(im.size, len(ids)))))
     flat = [im.ravel() for im in imgs]
     wsum = sum(cw.wsum for cw, _ in mats)
-    k = kernels()
     e1, e2 = np.ones(len(ids)), np.ones(len(ids))
     t = time.perf_counter()
     for _ in range(iterations):
@@ -133,15 +131,9 @@ def scipy_baseline(cams, imgs, grid, iterations=5):
             e1 = np.where(wsum > 0, e1 * np.exp(np.where(np.isfinite(acc), acc, -np.inf) / np.where(wsum > 0, wsum, 1)), e1)
     t_scipy = time.perf_counter() - t
     t = time.perf_counter()
+    work = ([np.empty(f.size) for f in flat], [np.empty(f.size) for f in flat])
     for _ in range(iterations):
-        acc = np.zeros(len(ids))
-        for (cw, _), f in zip(mats, flat, strict=True):
-            p = np.empty(f.size)
-            k["project"](cw.indptr, cw.indices, cw.data, e2, p)
-            lr = np.empty(f.size)
-            k["log_ratio"](f, p, lr)
-            k["back_project"](cw.indptr, cw.indices, cw.data, cw.width, cw.span, lr, acc)
-        k["smart_update"](e2, acc, wsum, 1.0)
+        smart_sweep([cw for cw, _ in mats], flat, e2, wsum, 1.0, *work)
     t_ours = time.perf_counter() - t
     diff = float(np.max(np.abs(e1 - e2)) / np.max(e2))
     nnz = sum(len(cw.data) for cw, _ in mats)

@@ -46,7 +46,7 @@ def kernels() -> dict:
         gaussian: (p0, p1, p2) = inverse covariance (xx, xy, yy), p3 = area * normalisation.
         """
         if model == 0:
-            return circle_overlap(math.sqrt(dx * dx + dy * dy), p0, 0.5641895835477563)
+            return circle_overlap(math.sqrt(dx * dx + dy * dy), p0, PIXEL_RADIUS)
         q = p0 * dx * dx + 2.0 * p1 * dx * dy + p2 * dy * dy
         return p3 * math.exp(-0.5 * q) if q < 9.0 else 0.0  # truncated at 3 sigma (Mahalanobis)
 
@@ -145,7 +145,6 @@ def kernels() -> dict:
     @nb.njit(parallel=True, cache=True)
     def log_ratio(img, proj, out):
         """log(I / proj); -inf where I = 0 (zero pixel), 0 where nothing projects (no information)."""
-        res = 0.0
         for p in nb.prange(img.shape[0]):
             if proj[p] <= 0.0:
                 out[p] = 0.0
@@ -153,10 +152,6 @@ def kernels() -> dict:
                 out[p] = -math.inf
             else:
                 out[p] = math.log(img[p] / proj[p])
-        for p in range(img.shape[0]):
-            d = img[p] - proj[p]
-            res += d * d
-        return res
 
     @nb.njit(parallel=True, cache=True)
     def back_project(indptr, indices, data, w, span, values, acc):
@@ -172,15 +167,6 @@ def kernels() -> dict:
                         continue
                     for k in range(indptr[p], indptr[p + 1]):
                         acc[indices[k]] += data[k] * val
-
-    @nb.njit(cache=True)
-    def back_project_sequential(indptr, indices, data, values, acc):
-        for p in range(indptr.shape[0] - 1):
-            val = values[p]
-            if val == 0.0:
-                continue
-            for k in range(indptr[p], indptr[p + 1]):
-                acc[indices[k]] += data[k] * val
 
     @nb.njit(parallel=True, cache=True)
     def smart_update(vol, acc, wsum, mu):

@@ -26,6 +26,7 @@ from mitpiv.lightfield.refocus import refocus_volume
 from mitpiv.physics.plenoptic import PlenopticCamera
 from mitpiv.reconstruct._kernels import kernels
 from mitpiv.reconstruct.grid import VoxelGrid
+from mitpiv.reconstruct.tomo import check_iterations
 
 __all__ = ["plenoptic_volume", "fuse", "drt_weights", "drt_mart", "FUSE_NORMALISATIONS"]
 
@@ -70,10 +71,6 @@ def plenoptic_volume(lf: LightField, grid: VoxelGrid, *, method: str = "additive
     return vol
 
 
-def _normal_fit(v):
-    return float(v.mean()), float(v.std())
-
-
 def fuse(volumes, *, normalise: str = "histogram") -> np.ndarray:
     """Fuse the volumes of several (plenoptic) cameras on one grid: ``(prod_m V_m')^(1/M)``.
 
@@ -103,7 +100,7 @@ def fuse(volumes, *, normalise: str = "histogram") -> np.ndarray:
     acc = np.zeros(vols[0].shape)
     for v in vols:
         if normalise == "histogram":
-            mu, sigma = _normal_fit(v)
+            mu, sigma = float(v.mean()), float(v.std())  # normal MLE fit of the histogram
             v = np.maximum(v - mu, 0.0) / sigma if sigma > 0 else np.zeros_like(v)
         elif normalise == "max":
             v = v / v.max() if v.max() > 0 else v
@@ -229,10 +226,7 @@ def drt_mart(raw, camera: PlenopticCamera, grid: VoxelGrid, *, iterations: int =
         raise ConfigError(f"drt_mart: 'raw' has shape {img.shape}; the camera's sensor is {h}x{w} (H, W).")
     if not np.all(np.isfinite(img)):
         raise ConfigError("drt_mart: 'raw' contains NaN or infinite pixels.")
-    if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or iterations < 0:
-        raise ConfigError(f"drt_mart: 'iterations' must be an integer >= 0, got {iterations!r}.")
-    if not (np.isfinite(mu) and 0 < mu < 2):
-        raise ConfigError(f"drt_mart: relaxation 'mu' must lie in (0, 2), got {mu!r}.")
+    check_iterations("drt_mart", iterations, mu)
     if prune_fraction is not None and not (0 <= prune_fraction <= 1):
         raise ConfigError(f"drt_mart: 'prune_fraction' must lie in [0, 1] or be None, got {prune_fraction!r}.")
     if not (np.isfinite(dark_floor) and 0 <= dark_floor < 1):

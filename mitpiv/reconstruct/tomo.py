@@ -85,6 +85,14 @@ def _check_images(images, mappings, grid, what):
     return [np.maximum(im, 0.0) for im in imgs], maps
 
 
+def check_iterations(what, iterations, mu) -> None:
+    """ConfigError unless ``iterations`` is an integer >= 0 and the relaxation ``mu`` is in (0, 2)."""
+    if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or iterations < 0:
+        raise ConfigError(f"{what}: 'iterations' must be an integer >= 0, got {iterations!r}.")
+    if not (np.isfinite(mu) and 0 < mu < 2):
+        raise ConfigError(f"{what}: relaxation 'mu' must lie in (0, 2), got {mu!r}.")
+
+
 def _check_choice(what, name, value, choices):
     if value not in choices:
         raise ConfigError(f"{what}: '{name}' must be one of {choices}, got {value!r}.")
@@ -469,10 +477,7 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
     """
     what = "smart" if smart else "mart"
     imgs, maps = _check_images(images, mappings, grid, what)
-    if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) or iterations < 0:
-        raise ConfigError(f"{what}: 'iterations' must be an integer >= 0, got {iterations!r}.")
-    if not (np.isfinite(mu) and 0 < mu < 2):
-        raise ConfigError(f"{what}: relaxation 'mu' must lie in (0, 2), got {mu!r}.")
+    check_iterations(what, iterations, mu)
     _check_choice(what, "interpolation", interpolation, INTERPOLATIONS)
     psf = _check_weight_options(what, weights, psf_sigma_px)
     if isinstance(init, str):
@@ -530,16 +535,10 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
     wsum = sum(cw.wsum for cw in cams)
     residuals, t1 = [], time.perf_counter()
     proj = [np.empty(f.size) for f in flat]
+    lr = [np.empty(f.size) for f in flat] if smart else []
     for it in range(iterations):
         if smart:
-            acc = np.zeros(len(idx))
-            res = 0.0
-            for cw, f, p in zip(cams, flat, proj, strict=True):
-                k["project"](cw.indptr, cw.indices, cw.data, vol, p)
-                lr = np.empty(f.size)
-                res += k["log_ratio"](f, p, lr)
-                k["back_project"](cw.indptr, cw.indices, cw.data, cw.width, cw.span, lr, acc)
-            k["smart_update"](vol, acc, wsum, float(mu))
+            smart_sweep(cams, flat, vol, wsum, float(mu), proj, lr)
             if return_info:
                 residuals.append(_residual(cams, flat, proj, vol, k) / norm)
         else:
@@ -558,6 +557,18 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
             "weight_bytes": int(sum(c.nbytes for c in cams)), "residuals": residuals, "setup_s": t_setup,
             "iterate_s": time.perf_counter() - t1, "row_span": [c.span for c in cams]}
     return out, info
+
+
+def smart_sweep(cams, flat, vol, wsum, mu, proj, lr) -> None:
+    """One SMART iteration in place on ``vol`` (active voxels): project, log ratios, back
+    projection, update. ``proj``/``lr``: per-camera work arrays of the image size."""
+    k = kernels()
+    acc = np.zeros(len(vol))
+    for cw, f, p, r in zip(cams, flat, proj, lr, strict=True):
+        k["project"](cw.indptr, cw.indices, cw.data, vol, p)
+        k["log_ratio"](f, p, r)
+        k["back_project"](cw.indptr, cw.indices, cw.data, cw.width, cw.span, r, acc)
+    k["smart_update"](vol, acc, wsum, mu)
 
 
 def _residual(cams, flat, proj, vol, k) -> float:
