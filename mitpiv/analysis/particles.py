@@ -1,0 +1,383 @@
+"""Particles in reconstructed volumes: 3D peak detection, sub-voxel localisation and
+one-to-one matching to the ground truth.
+
+Conventions: volumes are (n_z, n_y, n_x) arrays on a :class:`~mitpiv.reconstruct.VoxelGrid`;
+positions are world millimetres in (x, y, z) order; voxel coordinates are continuous
+indices (i, j, k) = (x, y, z) with voxel centres at integers (``VoxelGrid.to_voxel``).
+Every routine is vectorised over particles (NumPy, batched Levenberg-Marquardt for the
+3D Gaussian fit); nothing loops over particles in Python.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mitpiv.errors import ConfigError, check_positive
+
+LOCALISATION_METHODS = ("gauss3", "centroid", "lsq")
+
+
+@dataclass
+class FoundParticles:
+    """Particles found in a volume.
+
+    positions_mm, positions_vox : (N, 3) in (x, y, z) order.
+    peak : (N,) voxel value at the detected maximum.
+    saturated : (N,) True where the maximum is a plateau of equal values (clipped blob);
+        those are placed at the plateau's intensity-weighted centre.
+    edge : (N,) True where a neighbour along some axis lies outside the volume (that
+        axis keeps the integer position).
+    """
+
+    positions_mm: np.ndarray
+    positions_vox: np.ndarray
+    peak: np.ndarray
+    saturated: np.ndarray
+    edge: np.ndarray
+    voxel_mm: tuple
+    method: str
+    threshold: float
+
+    def __len__(self) -> int:
+        return int(self.positions_mm.shape[0])
+
+
+def _gauss3(l, c, r):
+    """Sub-voxel offset of the maximum of three samples: 3-point Gaussian, parabolic
+    fallback where any sample is <= 0 (the logarithm does not exist), 0 for a flat top."""
+    l, c, r = (np.asarray(a, dtype=np.float64) for a in (l, c, r))
+    pos = (l > 0) & (c > 0) & (r > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ll, lc, lr = (np.log(np.where(pos, a, 1.0)) for a in (l, c, r))
+        den_g = 2.0 * (ll - 2.0 * lc + lr)
+        den_p = 2.0 * (l - 2.0 * c + r)
+        off_g = np.where(den_g < 0, (ll - lr) / np.where(den_g < 0, den_g, 1.0), 0.0)
+        off_p = np.where(den_p < 0, (l - r) / np.where(den_p < 0, den_p, 1.0), 0.0)
+    return np.clip(np.where(pos, off_g, off_p), -1.0, 1.0)
+
+
+def _windows(volume, idx_zyx, h):
+    """(N, 2h+1, 2h+1, 2h+1) neighbourhoods around integer voxels (zero outside)."""
+    pad = np.pad(volume, h, mode="constant")
+    o = np.arange(-h, h + 1)
+    k = idx_zyx[:, 0, None, None, None] + h + o[None, :, None, None]
+    j = idx_zyx[:, 1, None, None, None] + h + o[None, None, :, None]
+    i = idx_zyx[:, 2, None, None, None] + h + o[None, None, None, :]
+    return pad[k, j, i]
+
+
+def _lsq_gaussian(win, start_xyz, iterations=30):
+    """Batched Levenberg-Marquardt fit of A exp(-sum (x - x0)^2 / 2 s^2) + b to cubic
+    windows (N, w, w, w); offsets relative to the window centre in (x, y, z)."""
+    n, w = win.shape[0], win.shape[1]
+    h = w // 2
+    o = np.arange(-h, h + 1, dtype=np.float64)
+    zz, yy, xx = np.meshgrid(o, o, o, indexing="ij")
+    X = np.stack([xx.ravel(), yy.ravel(), zz.ravel()], axis=0)  # (3, M)
+    y = win.reshape(n, -1).astype(np.float64)
+    b0 = np.clip(y.min(axis=1), 0.0, None)
+    p = np.column_stack([np.maximum(y.max(axis=1) - b0, 1e-30), start_xyz, np.zeros((n, 3)), b0])  # A, x0..z0, ln s, b
+    lam = np.full(n, 1e-3)
+
+    def model(p):
+        d = X[None, :, :] - p[:, 1:4, None]  # (n, 3, M)
+        s2 = np.exp(2.0 * p[:, 4:7])[:, :, None]
+        g = np.exp(-0.5 * np.sum(d * d / s2, axis=1))
+        return p[:, 0:1] * g + p[:, 7:8], g, d, s2
+
+    f, g, d, s2 = model(p)
+    cost = np.sum((f - y) ** 2, axis=1)
+    for _ in range(iterations):
+        J = np.empty((n, X.shape[1], 8))
+        J[:, :, 0] = g
+        Ag = (p[:, 0:1] * g)[:, None, :]
+        J[:, :, 1:4] = np.moveaxis(Ag * d / s2, 1, 2)
+        J[:, :, 4:7] = np.moveaxis(Ag * d * d / s2, 1, 2)
+        J[:, :, 7] = 1.0
+        r = y - f
+        JTJ = np.einsum("nmi,nmj->nij", J, J)
+        JTr = np.einsum("nmi,nm->ni", J, r)
+        A = JTJ + lam[:, None, None] * np.einsum("nii->ni", JTJ)[:, :, None] * np.eye(8)[None]
+        A += 1e-12 * np.eye(8)[None] * (np.einsum("nii->n", JTJ)[:, None, None] + 1e-30)
+        try:
+            step = np.linalg.solve(A, JTr[:, :, None])[:, :, 0]
+        except np.linalg.LinAlgError:  # a singular system: keep the current estimate
+            break
+        pn = p + step
+        pn[:, 4:7] = np.clip(pn[:, 4:7], np.log(0.2), np.log(3.0 * w))
+        fn, gn, dn, s2n = model(pn)
+        cn = np.sum((fn - y) ** 2, axis=1)
+        better = np.isfinite(cn) & (cn < cost)
+        p = np.where(better[:, None], pn, p)
+        f = np.where(better[:, None], fn, f)
+        g = np.where(better[:, None], gn, g)
+        d = np.where(better[:, None, None], dn, d)
+        s2 = np.where(better[:, None, None], s2n, s2)
+        cost = np.where(better, cn, cost)
+        lam = np.where(better, lam * 0.3, lam * 10.0)
+    off = p[:, 1:4]
+    # a fit that ran off the window (no blob in it) keeps the start
+    bad = ~np.all(np.isfinite(off), axis=1) | np.any(np.abs(off) > h, axis=1)
+    off[bad] = start_xyz[bad]
+    return off
+
+
+def find_particles(volume, grid, *, threshold: float | None = None, threshold_rel: float = 0.1, method: str = "gauss3",
+                   min_distance: int = 1, window: int | None = None) -> FoundParticles:
+    """Detect particles as 3D local maxima and localise them to sub-voxel precision.
+
+    volume : (n_z, n_y, n_x) array on ``grid`` (a :class:`~mitpiv.reconstruct.VoxelGrid`).
+    threshold : absolute intensity a maximum must exceed; default ``threshold_rel`` times
+        the volume maximum.
+    method : ``"gauss3"`` (3-point Gaussian per axis; parabolic where a neighbour is <= 0),
+        ``"centroid"`` (intensity-weighted centre of a ``window``^3 box, default 3), or
+        ``"lsq"`` (least-squares 3D Gaussian with background and per-axis widths on a
+        ``window``^3 box, default 5, started from gauss3).
+    min_distance : maxima must be the largest value within this many voxels (Chebyshev).
+
+    A plateau of equal maximal values (a saturated blob) yields one particle at the
+    plateau's intensity-weighted centre, flagged ``saturated``.
+    """
+    from scipy import ndimage
+
+    vol = grid.check_volume(volume)
+    if method not in LOCALISATION_METHODS:
+        raise ConfigError(f"find_particles: method={method!r} is not one of {LOCALISATION_METHODS}.")
+    if not np.all(np.isfinite(vol)):
+        raise ConfigError("find_particles: the volume holds NaN or infinite values; clean it first (np.nan_to_num).")
+    md = int(min_distance)
+    if md < 1 or md != min_distance:
+        raise ConfigError(f"find_particles: min_distance must be an integer >= 1 voxel, got {min_distance!r}.")
+    if window is None:
+        window = 5 if method == "lsq" else 3
+    if int(window) != window or window < 3 or window % 2 == 0:
+        raise ConfigError(f"find_particles: window must be an odd integer >= 3 voxels, got {window!r}.")
+    vmax = float(vol.max()) if vol.size else 0.0
+    if threshold is None:
+        if not (0.0 <= threshold_rel < 1.0):
+            raise ConfigError(f"find_particles: threshold_rel must be in [0, 1), got {threshold_rel!r}.")
+        thr = threshold_rel * vmax
+    else:
+        thr = float(threshold)
+    empty = np.zeros((0, 3))
+    vox_mm = tuple(grid.voxel_mm)
+    nothing = FoundParticles(empty, empty.copy(), np.zeros(0), np.zeros(0, bool), np.zeros(0, bool), vox_mm, method, thr)
+    if vmax <= thr or vmax <= 0.0:
+        return nothing
+    v = vol.astype(np.float64, copy=False)
+    mx = ndimage.maximum_filter(v, size=2 * md + 1, mode="constant", cval=-np.inf)
+    peaks = (v >= mx) & (v > thr)
+    labels, n = ndimage.label(peaks, structure=np.ones((3, 3, 3), bool))
+    if n == 0:
+        return nothing
+    ids = np.arange(1, n + 1)
+    size = ndimage.sum_labels(peaks, labels, ids)
+    com = np.asarray(ndimage.center_of_mass(v, labels, ids), dtype=np.float64).reshape(-1, 3)  # (k, j, i)
+    # seed voxel: the plateau voxel nearest its centre (exact for single-voxel maxima)
+    seed = np.rint(com).astype(np.int64)
+    seed = np.clip(seed, 0, np.asarray(v.shape) - 1)
+    saturated = size > 1
+    fix = saturated & ~peaks[seed[:, 0], seed[:, 1], seed[:, 2]]
+    if np.any(fix):  # a curved plateau whose centre is off it: take its first voxel
+        first = ndimage.labeled_comprehension(np.arange(v.size).reshape(v.shape), labels, ids[fix], np.min, np.int64, -1)
+        seed[fix] = np.column_stack(np.unravel_index(first, v.shape))
+    shape = np.asarray(v.shape)
+    edge_axis = (seed == 0) | (seed == shape - 1)  # (k, j, i)
+    off = np.zeros((n, 3))  # (x, y, z)
+    h = 1
+    win = _windows(v, seed, h)
+    c = win[:, 1, 1, 1]
+    g3 = np.column_stack([_gauss3(win[:, 1, 1, 0], c, win[:, 1, 1, 2]),
+                          _gauss3(win[:, 1, 0, 1], c, win[:, 1, 2, 1]),
+                          _gauss3(win[:, 0, 1, 1], c, win[:, 2, 1, 1])])
+    if method == "gauss3":
+        off = g3
+    elif method == "centroid":
+        hw = window // 2
+        w = np.clip(_windows(v, seed, hw), 0.0, None)
+        o = np.arange(-hw, hw + 1, dtype=np.float64)
+        tot = w.sum(axis=(1, 2, 3))
+        tot = np.where(tot > 0, tot, 1.0)
+        off = np.column_stack([np.einsum("nkji,i->n", w, o), np.einsum("nkji,j->n", w, o), np.einsum("nkji,k->n", w, o)])
+        off /= tot[:, None]
+    else:
+        off = _lsq_gaussian(_windows(v, seed, window // 2), g3)
+    off = np.where(edge_axis[:, ::-1], 0.0, off)
+    pos_vox = seed[:, ::-1].astype(np.float64) + off
+    pos_vox[saturated] = com[saturated][:, ::-1]
+    pos_mm = np.asarray(grid.origin_mm) + (pos_vox + 0.5) * np.asarray(grid.voxel_mm)
+    return FoundParticles(pos_mm, pos_vox, v[seed[:, 0], seed[:, 1], seed[:, 2]], saturated, np.any(edge_axis, axis=1),
+                          vox_mm, method, thr)
+
+
+@dataclass
+class MatchResult:
+    """One-to-one matching of found particles to the truth.
+
+    pairs : (K, 2) indices (found, truth) into the arrays given to :func:`match`.
+    errors_mm : (K, 3) found - truth in (x, y, z).
+    n_found, n_truth : particles considered (truth restricted to the grid when one is given).
+    """
+
+    pairs: np.ndarray
+    errors_mm: np.ndarray
+    n_found: int
+    n_truth: int
+    radius_mm: float
+    voxel_mm: tuple | None = None
+    truth_index: np.ndarray = field(default=None, repr=False)
+
+    @property
+    def n_matched(self) -> int:
+        return int(self.pairs.shape[0])
+
+    @property
+    def detection_rate(self) -> float:
+        """Matched / truth particles."""
+        return self.n_matched / self.n_truth if self.n_truth else float("nan")
+
+    @property
+    def ghost_fraction(self) -> float:
+        """Unmatched (ghost) / found particles."""
+        return (self.n_found - self.n_matched) / self.n_found if self.n_found else float("nan")
+
+    def _stat(self, f, voxels: bool):
+        e = self.errors_mm
+        if e.shape[0] == 0:
+            return np.full(3, np.nan)
+        s = f(e)
+        if voxels:
+            if self.voxel_mm is None:
+                raise ConfigError("MatchResult: voxel units need the grid's voxel size; pass grid= or FoundParticles.")
+            s = s / np.asarray(self.voxel_mm)
+        return s
+
+    def bias(self, voxels: bool = False) -> np.ndarray:
+        return self._stat(lambda e: e.mean(axis=0), voxels)
+
+    def rms(self, voxels: bool = False) -> np.ndarray:
+        return self._stat(lambda e: np.sqrt(np.mean(e * e, axis=0)), voxels)
+
+    def std(self, voxels: bool = False) -> np.ndarray:
+        return self._stat(lambda e: e.std(axis=0, ddof=1) if e.shape[0] > 1 else np.zeros(3), voxels)
+
+    def u95(self, voxels: bool = False) -> np.ndarray:
+        """95 % uncertainty per axis, 1.96 standard deviations of the error."""
+        return 1.96 * self.std(voxels)
+
+    def summary(self) -> dict:
+        out = {"n_found": self.n_found, "n_truth": self.n_truth, "n_matched": self.n_matched,
+               "radius_mm": self.radius_mm, "detection_rate": self.detection_rate, "ghost_fraction": self.ghost_fraction}
+        for name in ("bias", "rms", "u95"):
+            out[f"{name}_mm"] = [float(x) for x in getattr(self, name)()]
+            if self.voxel_mm is not None:
+                out[f"{name}_vox"] = [float(x) for x in getattr(self, name)(voxels=True)]
+        return out
+
+    def plot(self, path, *, title: str = "particle position error") -> None:
+        """Error PDFs per axis (histogram and the normal density of the same mean/std) as a PNG."""
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        from mitpiv.io.atomic import atomic_path
+
+        vox = self.voxel_mm is not None
+        e = self.errors_mm / (np.asarray(self.voxel_mm) if vox else 1.0)
+        unit = "voxels" if vox else "mm"
+        fig, axs = plt.subplots(1, 3, figsize=(11, 3.4), sharey=False)
+        for a, ax in enumerate(axs):
+            x = e[:, a]
+            if x.size:
+                lim = max(1e-6, float(np.percentile(np.abs(x), 99.5)) * 1.2)
+                ax.hist(x, bins=max(10, min(60, x.size // 10)), range=(-lim, lim), density=True, color="0.7")
+                sd = x.std() if x.size > 1 else 0.0
+                if sd > 0:
+                    t = np.linspace(-lim, lim, 200)
+                    ax.plot(t, np.exp(-0.5 * ((t - x.mean()) / sd) ** 2) / (sd * np.sqrt(2 * np.pi)), "k-", lw=1)
+                ax.set_title(f"{'xyz'[a]}: bias {x.mean():+.3f}, 1.96$\\sigma$ {1.96 * sd:.3f}", fontsize=9)
+            ax.set_xlabel(f"found - truth [{unit}]")
+        axs[0].set_ylabel("PDF")
+        fig.suptitle(f"{title}: {self.n_matched}/{self.n_truth} matched ({100 * self.detection_rate:.1f} %), "
+                     f"ghosts {100 * self.ghost_fraction:.1f} %", fontsize=10)
+        fig.tight_layout()
+        with atomic_path(path, suffix=".png") as tmp:
+            fig.savefig(tmp, dpi=110)
+        plt.close(fig)
+
+
+def _as_positions(p, name):
+    if isinstance(p, FoundParticles):
+        p = p.positions_mm
+    a = np.asarray(p, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ConfigError(f"match: '{name}' must be an (N, 3) array of x, y, z positions [mm], got shape {a.shape}.")
+    if not np.all(np.isfinite(a)):
+        raise ConfigError(f"match: '{name}' holds NaN or infinite positions.")
+    return a
+
+
+def assign(a, b, radius: float) -> np.ndarray:
+    """Minimum-total-distance one-to-one assignment between point sets a (N, d) and b
+    (M, d) among pairs closer than ``radius``; returns (K, 2) index pairs.
+
+    Each point may stay unmatched at a cost of ``radius``, so the assignment matches as
+    many pairs as the radius allows and, among those, minimises the summed distance
+    (a sparse minimum-weight bipartite matching, not a greedy nearest-neighbour pass).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import min_weight_full_bipartite_matching
+    from scipy.spatial import cKDTree
+
+    n, m = a.shape[0], b.shape[0]
+    if n == 0 or m == 0:
+        return np.zeros((0, 2), np.int64)
+    d = cKDTree(a).sparse_distance_matrix(cKDTree(b), radius, output_type="coo_matrix")
+    keep = d.data <= radius
+    r, c, w = d.row[keep], d.col[keep], d.data[keep]
+    if r.size == 0:
+        return np.zeros((0, 2), np.int64)
+    eps = 1e-9 * radius
+    # rows: found (n) + dummies of truth (m); cols: truth (m) + dummies of found (n)
+    rows = np.concatenate([r, np.arange(n), n + np.arange(m), n + c])
+    cols = np.concatenate([c, m + np.arange(n), np.arange(m), m + r])
+    wts = np.concatenate([w + eps, np.full(n, radius), np.full(m, radius), np.full(r.size, eps)])
+    g = coo_matrix((wts, (rows, cols)), shape=(n + m, n + m)).tocsr()
+    row, col = min_weight_full_bipartite_matching(g)
+    real = (row < n) & (col < m)
+    order = np.argsort(row[real], kind="stable")
+    return np.column_stack([row[real][order], col[real][order]]).astype(np.int64)
+
+
+def match(found, truth, *, radius_mm: float | None = None, grid=None, radius_voxels: float = 2.0) -> MatchResult:
+    """Match found particles to the truth one-to-one within a search radius.
+
+    found : :class:`FoundParticles` or (N, 3) positions [mm]; truth : (M, 3) [mm].
+    radius_mm : search radius; default ``radius_voxels`` times the largest voxel edge of
+        ``grid`` (or of the grid ``found`` came from).
+    grid : when given, truth particles outside the grid's bounds are not counted.
+
+    The assignment minimises the summed distance over the largest set of pairs within
+    the radius (see :func:`assign`); the remaining found particles are ghosts.
+    """
+    voxel_mm = grid.voxel_mm if grid is not None else (found.voxel_mm if isinstance(found, FoundParticles) else None)
+    f = _as_positions(found, "found")
+    t = _as_positions(truth, "truth")
+    if radius_mm is None:
+        if voxel_mm is None:
+            raise ConfigError("match: give radius_mm, or a grid (radius_voxels times its voxel size).")
+        radius_mm = check_positive("radius_voxels", radius_voxels, owner="match") * max(voxel_mm)
+    radius_mm = check_positive("radius_mm", radius_mm, owner="match", unit="mm")
+    tidx = np.arange(t.shape[0])
+    if grid is not None:
+        lo, hi = np.asarray(grid.origin_mm), np.asarray(grid.upper_mm)
+        inside = np.all((t >= lo) & (t <= hi), axis=1)
+        tidx = tidx[inside]
+    pairs = assign(f, t[tidx], radius_mm)
+    pairs[:, 1] = tidx[pairs[:, 1]]
+    err = f[pairs[:, 0]] - t[pairs[:, 1]]
+    return MatchResult(pairs, err, f.shape[0], int(tidx.size), float(radius_mm),
+                       tuple(voxel_mm) if voxel_mm is not None else None, tidx)

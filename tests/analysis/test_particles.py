@@ -1,0 +1,151 @@
+"""3D particle detection, sub-voxel localisation and matching against exact synthetic truth."""
+
+import numpy as np
+import pytest
+from scipy.optimize import linear_sum_assignment
+
+from mitpiv.analysis import FoundParticles, find_particles, match, truth_volume
+from mitpiv.analysis.particles import _gauss3, assign
+from mitpiv.errors import ConfigError
+from mitpiv.reconstruct import VoxelGrid
+
+VOX = 0.05
+GRID = VoxelGrid((0.0, 0.0, 0.0), (VOX, VOX, VOX), (40, 64, 64))
+
+
+def lattice_particles(grid, spacing_vox=8, seed=0):
+    """Isolated particles: a lattice with +-1 voxel jitter (no two blobs overlap)."""
+    rng = np.random.default_rng(seed)
+    nz, ny, nx = grid.shape
+    c = [np.arange(6, n - 5, spacing_vox) for n in (nx, ny, nz)]
+    xx, yy, zz = np.meshgrid(*c, indexing="ij")
+    vox = np.stack([xx.ravel(), yy.ravel(), zz.ravel()], axis=1) + rng.uniform(-1, 1, (xx.size, 3))
+    return np.asarray(grid.origin_mm) + (vox + 0.5) * np.asarray(grid.voxel_mm)
+
+
+def test_gauss3_exact_for_sampled_gaussian_and_parabola_fallback():
+    x0 = np.array([-0.43, -0.1, 0.0, 0.27, 0.49])
+    s = 1.3
+    g = [np.exp(-((k - x0) ** 2) / (2 * s * s)) for k in (-1, 0, 1)]
+    np.testing.assert_allclose(_gauss3(*g), x0, atol=1e-12)
+    # a neighbour <= 0: the parabola through the three samples (exact for a parabola)
+    l, c, r = (1.0 - (k - x0) ** 2 - 1.3 for k in (-1, 0, 1))  # left < 0 for all x0 here
+    assert np.all(l <= 0)
+    np.testing.assert_allclose(_gauss3(l, c, r), x0, atol=1e-12)
+    assert _gauss3(1.0, 1.0, 1.0) == 0.0  # flat top: no offset, no NaN
+
+
+@pytest.mark.parametrize("method, tol", [("gauss3", 0.01), ("lsq", 0.01), ("centroid", 0.25)])
+def test_isolated_particles_subvoxel(method, tol):
+    p = lattice_particles(GRID)
+    vol = truth_volume(p, GRID, sigma_voxels=1.0)
+    found = find_particles(vol, GRID, method=method)
+    r = match(found, p, grid=GRID)
+    assert r.detection_rate == 1.0 and r.ghost_fraction == 0.0
+    # tolerance: gauss3 and lsq are exact for a Gaussian up to voxel integration (<0.01
+    # voxel); a 3^3 centroid of a sigma = 1 voxel blob is pulled towards the voxel centre
+    assert np.all(np.median(np.abs(r.errors_mm), axis=0) / VOX < tol)
+    assert np.all(np.abs(r.bias(voxels=True)) < tol)
+
+
+def test_lsq_fits_anisotropic_blob_better_than_centroid():
+    p = lattice_particles(GRID, seed=3)
+    vol = truth_volume(p, GRID, sigma_voxels=1.6)
+    err = {m: np.abs(match(find_particles(vol, GRID, method=m), p, grid=GRID).errors_mm).mean() / VOX
+           for m in ("centroid", "lsq")}
+    assert err["lsq"] < 0.02 < err["centroid"]
+
+
+def test_boundary_touching_and_saturated_particles():
+    o, v = np.asarray(GRID.origin_mm), np.asarray(GRID.voxel_mm)
+    edge = o + (np.array([[0.2, 30.3, 20.1], [63.0, 10.4, 39.0]]) + 0.5) * v  # on the x=0 face / a corner
+    touching = o + (np.array([[30.0, 30.0, 20.0], [32.6, 30.0, 20.0]]) + 0.5) * v  # 2.6 voxels apart
+    p = np.vstack([edge, touching])
+    vol = truth_volume(p, GRID, sigma_voxels=0.7)
+    found = find_particles(vol, GRID)
+    r = match(found, p, radius_mm=1.5 * VOX)
+    assert r.n_matched == 4 and len(found) == 4
+    assert found.edge.sum() == 2
+    e = np.abs(r.errors_mm) / VOX
+    assert np.all(e[np.isin(r.pairs[:, 1], [2, 3])] < 0.2)  # the touching pair keeps its positions
+    assert np.all(e < 0.8)  # edge particles keep the integer position on the cut axis
+    # saturated blobs: clip at half the weakest peak -> one particle per plateau, at its centre
+    q = lattice_particles(GRID, seed=5)
+    vol = truth_volume(q, GRID, sigma_voxels=1.0)
+    peaks = find_particles(vol, GRID).peak
+    sat = np.minimum(vol, 0.5 * peaks.min())
+    found = find_particles(sat, GRID)
+    r = match(found, q, grid=GRID)
+    assert len(found) == len(q) and r.detection_rate == 1.0 and found.saturated.mean() > 0.9
+    assert np.all(np.abs(r.errors_mm) / VOX < 0.35)
+    assert np.all(np.isfinite(found.positions_mm))
+
+
+def test_empty_and_bad_volumes():
+    found = find_particles(np.zeros(GRID.shape), GRID)
+    assert isinstance(found, FoundParticles) and len(found) == 0
+    r = match(found, lattice_particles(GRID), grid=GRID)
+    assert r.detection_rate == 0.0 and np.isnan(r.ghost_fraction) and np.all(np.isnan(r.rms()))
+    bad = np.zeros(GRID.shape)
+    bad[3, 3, 3] = np.nan
+    with pytest.raises(ConfigError, match="NaN"):
+        find_particles(bad, GRID)
+    with pytest.raises(ConfigError, match="method"):
+        find_particles(np.zeros(GRID.shape), GRID, method="gauss")
+    with pytest.raises(ConfigError, match="shape"):
+        find_particles(np.zeros((4, 4, 4)), GRID)
+    with pytest.raises(ConfigError, match="window"):
+        find_particles(np.zeros(GRID.shape), GRID, method="centroid", window=4)
+    with pytest.raises(ConfigError, match="radius"):
+        match(np.zeros((2, 3)), np.zeros((2, 3)))
+    with pytest.raises(ConfigError, match="truth"):
+        match(np.zeros((2, 3)), np.zeros((2, 2)), radius_mm=1.0)
+
+
+def test_assignment_is_the_optimal_one_to_one_matching():
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        a = rng.uniform(0, 1, (rng.integers(1, 12), 2))
+        b = rng.uniform(0, 1, (rng.integers(1, 12), 2))
+        R = 0.3
+        pairs = assign(a, b, R)
+        assert len(set(pairs[:, 0])) == len(pairs) and len(set(pairs[:, 1])) == len(pairs)
+        d = np.linalg.norm(a[pairs[:, 0]] - b[pairs[:, 1]], axis=1)
+        assert np.all(d <= R)
+        # reference: dense assignment where "unmatched" costs R per point (2R per pair)
+        D = np.linalg.norm(a[:, None] - b[None], axis=2)
+        n, m = D.shape
+        big = np.full((n + m, m + n), 1e9)
+        big[:n, :m] = np.where(D <= R, D, 1e9)
+        big[np.arange(n), m + np.arange(n)] = R
+        big[n + np.arange(m), np.arange(m)] = R
+        big[n:, m:] = np.where((D <= R).T, 0.0, 1e9)
+        r, c = linear_sum_assignment(big)
+        ref = big[r, c].sum()
+        ours = d.sum() + R * (n - len(pairs)) + R * (m - len(pairs))
+        assert ours == pytest.approx(ref, abs=1e-9)
+
+
+def test_match_statistics_and_grid_restriction(tmp_path):
+    rng = np.random.default_rng(11)
+    truth = rng.uniform((0.3, 0.3, 0.3), (2.9, 2.9, 1.7), (800, 3))
+    sigma = np.array([0.004, 0.006, 0.012])
+    bias = np.array([0.002, 0.0, -0.003])
+    keep = rng.random(truth.shape[0]) < 0.8
+    found = truth[keep] + bias + rng.normal(0, 1, (keep.sum(), 3)) * sigma
+    ghosts = rng.uniform((0, 0, 0), (3.2, 3.2, 2.0), (200, 3))
+    ghosts = ghosts[np.min(np.linalg.norm(ghosts[:, None] - truth[None], axis=2), axis=1) > 0.2]
+    outside = np.array([[50.0, 50.0, 50.0]])
+    r = match(np.vstack([found, ghosts]), np.vstack([truth, outside]), radius_mm=0.1, grid=GRID)
+    assert r.n_truth == truth.shape[0]  # the particle outside the grid does not count
+    assert r.detection_rate == pytest.approx(keep.mean(), abs=1e-12)
+    assert r.ghost_fraction == pytest.approx(len(ghosts) / (keep.sum() + len(ghosts)), abs=1e-12)
+    assert len(ghosts) > 50
+    # tolerance: 4 standard errors of the mean; the std of ~640 samples is within 10 % (3.5 sigma)
+    assert np.all(np.abs(r.bias() - bias) < 4 * sigma / np.sqrt(keep.sum()))
+    np.testing.assert_allclose(r.u95(), 1.96 * sigma, rtol=0.1)
+    np.testing.assert_allclose(r.u95(voxels=True), 1.96 * sigma / VOX, rtol=0.1)
+    s = r.summary()
+    assert s["n_matched"] == keep.sum() and len(s["rms_vox"]) == 3
+    r.plot(tmp_path / "pdf.png")
+    assert (tmp_path / "pdf.png").stat().st_size > 10_000
