@@ -1,5 +1,5 @@
-"""Command-line interface: ``mitpiv render``, ``info``, ``sensor``, ``decode``, ``refocus``
-and ``reconstruct``.
+"""Command-line interface: ``mitpiv render``, ``info``, ``sensor``, ``decode``, ``refocus``,
+``reconstruct``, ``evaluate`` and ``piv``.
 
 Thin: parses arguments, calls library functions, shows progress. Errors from mitpiv
 print as one line and exit with status 2.
@@ -207,6 +207,118 @@ def cmd_reconstruct(args) -> int:
     return 0
 
 
+def _read_volume(path):
+    """(volume, VoxelGrid, meta) from a .npz written by ``mitpiv reconstruct``."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from mitpiv.reconstruct import VoxelGrid
+
+    path = Path(path)
+    if not path.is_file():
+        raise MitpivError(f"volume file {str(path)!r} does not exist.")
+    try:
+        with np.load(path) as z:
+            vol = z["volume"]
+            meta = json.loads(str(z["meta"]))
+        grid = VoxelGrid.from_dict(meta["grid"])
+    except (KeyError, ValueError, OSError) as e:
+        raise MitpivError(f"{str(path)!r} is not a volume written by 'mitpiv reconstruct' ({e}).") from None
+    return grid.check_volume(vol, str(path)), grid, meta
+
+
+def _truth_frame(path, frame: int):
+    from mitpiv.io import read_truth
+
+    truth = read_truth(path)
+    n = truth["positions_mm"].shape[0]
+    if not (-n <= frame < n):
+        raise MitpivError(f"--frame {frame} is out of range: {path} holds {n} frame(s).")
+    return truth
+
+
+def cmd_evaluate(args) -> int:
+    from pathlib import Path
+
+    from mitpiv import analysis
+    from mitpiv.io.atomic import atomic_path
+
+    vol, grid, _ = _read_volume(args.volume)
+    truth = _truth_frame(args.truth, args.frame)
+    pos = truth["positions_mm"][args.frame]
+    found = analysis.find_particles(vol, grid, method=args.method, threshold_rel=args.threshold_rel)
+    res = analysis.match(found, pos, grid=grid, radius_voxels=args.radius_voxels)
+    tv = analysis.truth_volume(pos, grid)
+    out = {"volume": str(args.volume), "truth": str(args.truth), "frame": args.frame, "method": args.method,
+           "Q": analysis.quality_q(vol, tv), "Q*": analysis.quality_q_zero_mean(vol, tv),
+           "Q'": analysis.rank_correlation(vol, tv), "SNR": analysis.plane_snr(vol), "particles": res.summary()}
+    s = out["particles"]
+    q_rank = out["Q'"]
+    print(f"Q {out['Q']:.4f}  Q* {out['Q*']:.4f}  Q' {q_rank:.4f}  SNR {out['SNR']:.2f}")
+    print(f"particles: {s['n_found']} found, {s['n_truth']} in the volume, {s['n_matched']} matched "
+          f"(detection {100 * s['detection_rate']:.1f} %, ghosts {100 * s['ghost_fraction']:.1f} %)")
+    for name in ("bias", "rms", "u95"):
+        v = s[f"{name}_vox"]
+        print(f"  {name:4s} [voxels] x {v[0]:+.3f}  y {v[1]:+.3f}  z {v[2]:+.3f}")
+    if args.out:
+        out_path = Path(args.out)
+        if out_path.suffix != ".json":
+            raise MitpivError(f"evaluate: --out must be a .json file, got {str(out_path)!r}.")
+        with atomic_path(out_path, suffix=".json") as tmp:
+            tmp.write_text(json.dumps(out, indent=2))
+        res.plot(out_path.with_suffix(".png"))
+        print(f"-> {out_path} (+ error PDFs {out_path.with_suffix('.png')})")
+    return 0
+
+
+def cmd_piv(args) -> int:
+    from pathlib import Path
+
+    from mitpiv import analysis
+
+    out = Path(args.out)
+    if out.suffix != ".npz":
+        raise MitpivError(f"piv: --out must be a .npz file, got {str(out)!r}.")
+    va, grid, _ = _read_volume(args.vol_a)
+    vb, grid_b, _ = _read_volume(args.vol_b)
+    if grid_b != grid:
+        raise MitpivError(f"piv: the volumes lie on different grids ({grid.to_dict()} vs {grid_b.to_dict()}); "
+                          f"reconstruct both frames on the same --bounds and --voxel.")
+    windows = [tuple(int(x) for x in w.split("x")) if "x" in w else int(w) for w in args.windows]
+    if any(isinstance(w, tuple) and len(w) != 3 for w in windows):
+        raise MitpivError(f"piv: --windows entries are N or WXxWYxWZ, got {args.windows}.")
+    dt, flow, t0 = args.dt, None, 0.0
+    if args.truth:
+        from mitpiv.physics.flows import flow_from_dict
+
+        truth = _truth_frame(args.truth, args.frame)
+        if not truth["flow"]:
+            raise MitpivError(f"piv: {args.truth} names no analytic flow; velocity errors need one.")
+        if truth["times_s"].size < args.frame + 2:
+            raise MitpivError(f"piv: {args.truth} has no frame after --frame {args.frame}.")
+        flow = flow_from_dict(truth["flow"])
+        t0 = float(truth["times_s"][args.frame])
+        dt = dt if dt else float(truth["times_s"][args.frame + 1] - t0)
+    field = analysis.piv3d(va, vb, grid, windows=windows, overlap=args.overlap, deform=not args.no_deform,
+                           interpolation=args.interpolation, normalised=args.normalised, threshold=args.threshold,
+                           replace=None if args.replace == "none" else args.replace, dt_s=dt, progress=True)
+    metrics = {}
+    if flow is not None:
+        res = analysis.velocity_error(field, flow, t0_s=t0)
+        metrics = {k: res[k] for k in ("rms", "bias", "rms_vox", "bias_vox", "rms_magnitude", "n", "outlier_ratio", "units")}
+        field.info["velocity_error"] = metrics
+        analysis.plot_velocity_error(field, res, out.with_suffix(".error.png"))
+    field.save(out)
+    print(f"{field.n_vectors} vectors {field.shape[::-1]} (x, y, z), {field.info['seconds']:.1f} s, "
+          f"outliers {100 * field.outlier_ratio:.2f} %, invalid {field.info['invalid']} -> {out}")
+    if metrics:
+        r, b = metrics["rms_vox"], metrics["bias_vox"]
+        print(f"  velocity error [voxels]: rms x {r[0]:.4f} y {r[1]:.4f} z {r[2]:.4f}; "
+              f"bias x {b[0]:+.4f} y {b[1]:+.4f} z {b[2]:+.4f} (plot {out.with_suffix('.error.png')})")
+    return 0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="mitpiv", description="Physically based rendering testbed for volumetric PIV.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -277,6 +389,31 @@ def main(argv=None) -> int:
     c.add_argument("--truth", default=None, help="truth .npz: print Q, Q*, Q' and SNR")
     c.add_argument("--frame", type=int, default=0, help="truth frame of the images")
     c.set_defaults(func=cmd_reconstruct)
+    e = sub.add_parser("evaluate", help="find particles in a reconstructed volume, match them to the truth, print errors")
+    e.add_argument("volume", help="volume .npz from 'mitpiv reconstruct'")
+    e.add_argument("--truth", required=True, help="truth .npz (particle positions per frame)")
+    e.add_argument("--frame", type=int, default=0, help="truth frame of the volume")
+    e.add_argument("--method", choices=["gauss3", "centroid", "lsq"], default="gauss3", help="sub-voxel localisation")
+    e.add_argument("--threshold-rel", type=float, default=0.1, help="peaks above this fraction of the maximum")
+    e.add_argument("--radius-voxels", type=float, default=2.0, help="matching search radius [voxels]")
+    e.add_argument("--out", default=None, help="metrics .json (+ error PDF plot .png)")
+    e.set_defaults(func=cmd_evaluate)
+    v = sub.add_parser("piv", help="multi-pass 3D cross-correlation between two reconstructed volumes")
+    v.add_argument("vol_a", help="volume .npz of the first frame")
+    v.add_argument("vol_b", help="volume .npz of the second frame")
+    v.add_argument("--out", required=True, help="vector field .npz")
+    v.add_argument("--windows", nargs="+", default=["64", "48", "32"],
+                   help="window per pass: N (cubic) or WXxWYxWZ (default 64 48 32)")
+    v.add_argument("--overlap", type=float, default=0.75, help="window overlap fraction [0, 1)")
+    v.add_argument("--no-deform", action="store_true", help="integer window shifting instead of window deformation")
+    v.add_argument("--interpolation", choices=["linear", "cubic"], default="cubic", help="deformation resampling")
+    v.add_argument("--normalised", action="store_true", help="normalised cross-correlation")
+    v.add_argument("--threshold", type=float, default=2.0, help="universal outlier detection threshold")
+    v.add_argument("--replace", choices=["median", "interpolation", "none"], default="median")
+    v.add_argument("--dt", type=float, default=None, help="time between the frames [s]: velocities in mm/s")
+    v.add_argument("--truth", default=None, help="truth .npz with the flow: velocity error against it")
+    v.add_argument("--frame", type=int, default=0, help="truth frame of vol_a")
+    v.set_defaults(func=cmd_piv)
     args = p.parse_args(argv)
     try:
         return args.func(args)
