@@ -212,6 +212,7 @@ def test_anisotropic_windows_normalised_peak_and_save_load(tmp_path):
     ({"interpolation": "sinc"}, "interpolation"),
     ({"replace": "zero"}, "replace"),
     ({"dt_s": 0}, "dt_s"),
+    ({"smooth": "median"}, "smooth"),
 ])
 def test_bad_parameters(kwargs, match):
     with pytest.raises(ConfigError, match=match):
