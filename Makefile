@@ -24,6 +24,7 @@ bench: setup
 	$(PY) bench/bench_optics.py
 	$(PY) bench/bench_lightfield.py
 	$(PY) bench/bench_reconstruct.py
+	$(PY) bench/bench_analysis.py
 
 clean:
 	rm -rf out .pytest_cache
