@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mitpiv.analysis.particles import _gauss3
 from mitpiv.errors import ConfigError, FileFormatError, check_positive
 
 REPLACE_METHODS = ("median", "interpolation")
@@ -273,12 +274,6 @@ def _gather(padded, pad, starts_zyx, w_zyx):
     return view[s[:, 0], s[:, 1], s[:, 2]]
 
 
-def _subpixel(corr_flat_vals):
-    from mitpiv.analysis.particles import _gauss3
-
-    return _gauss3(*corr_flat_vals)
-
-
 def _correlate(a, b, normalised, width):
     """Displacement (n, 3) (x, y, z) in voxels, peak, snr, valid for window stacks (n, wz, wy, wx)."""
     from scipy import fft
@@ -314,7 +309,7 @@ def _correlate(a, b, normalised, width):
         l = corr[r, idx_lo[0], idx_lo[1], idx_lo[2]]
         h = corr[r, idx_hi[0], idx_hi[1], idx_hi[2]]
         integer = np.where(p < (m + 1) // 2, p, p - m)  # circular: the upper half is negative
-        offs.append(integer + _subpixel((l, c, h)))
+        offs.append(integer + _gauss3(l, c, h))
     disp = np.column_stack(offs)
     # peak ratio: highest value outside a (2 width + 1)^3 box around the primary peak
     o = np.arange(-width, width + 1)
