@@ -108,42 +108,111 @@ class BacklitDetections:
 
 def _split_touching(mask, min_separation_px):
     """Labels of ``mask`` with touching round silhouettes separated: markers are the maxima
-    of the Euclidean distance transform (plateaus merged, maxima closer than
-    ``min_separation_px`` merged), grown back over the mask by a watershed on the
-    inverted distance (``scipy.ndimage.watershed_ift``)."""
+    of the Euclidean distance transform (one per plateau); a marker inside the inscribed
+    circle of a stronger one, or closer than ``min_separation_px``, is dropped (one disk,
+    one marker, however ragged its edge); the markers grow back over the mask by a
+    watershed on the inverted distance (``scipy.ndimage.watershed_ift``)."""
     from scipy import ndimage
+    from scipy.spatial import cKDTree
 
     dist = ndimage.distance_transform_edt(mask)
-    size = 2 * int(min_separation_px) + 1
-    peaks = mask & (dist >= ndimage.maximum_filter(dist, size=size)) & (dist >= 1.0)
-    markers, n = ndimage.label(ndimage.binary_dilation(peaks, iterations=1) & mask)
+    peaks = mask & (dist >= ndimage.maximum_filter(dist, size=3)) & (dist >= 1.0)
+    plab, n = ndimage.label(peaks, structure=np.ones((3, 3), bool))
     if n <= 1:
         return ndimage.label(mask)
+    ids = np.arange(1, n + 1)
+    c = np.asarray(ndimage.center_of_mass(peaks, plab, ids)).reshape(-1, 2)
+    h = ndimage.maximum(dist, plab, ids)
+    pairs = cKDTree(c).query_pairs(max(float(h.max()), float(min_separation_px)), output_type="ndarray")
+    keep = np.ones(n, bool)
+    if pairs.size:
+        sep = np.linalg.norm(c[pairs[:, 0]] - c[pairs[:, 1]], axis=1)
+        close = sep < np.maximum(np.maximum(h[pairs[:, 0]], h[pairs[:, 1]]), min_separation_px)
+        a, b = pairs[close, 0], pairs[close, 1]
+        weaker = np.where((h[a] < h[b]) | ((h[a] == h[b]) & (a > b)), a, b)
+        keep[weaker] = False
+    if keep.sum() <= 1:
+        return ndimage.label(mask)
+    remap = np.zeros(n + 1, np.int32)
+    remap[ids[keep]] = np.arange(1, keep.sum() + 1)
+    markers = remap[plab].astype(np.int32)
+    m = int(keep.sum())
     level = np.round(65535 * (1.0 - dist / max(float(dist.max()), 1e-12))).astype(np.uint16)
-    markers = markers.astype(np.int32)
     markers[~mask] = -1  # background is its own basin
     lab = ndimage.watershed_ift(level, markers)
     lab[~mask | (lab < 0)] = 0
-    # regions the watershed could not reach keep their own connected-component label
-    rest, m = ndimage.label(mask & (lab == 0))
-    lab = np.where(rest > 0, rest + n, lab)
-    return lab, n + m
+    # parts the watershed could not reach keep their own connected-component label
+    rest, r = ndimage.label(mask & (lab == 0))
+    lab = np.where(rest > 0, rest + m, lab)
+    return lab, m + r
+
+
+def _dedupe(uv, score, radius_px=1.0):
+    """Indices of points kept when, of any two closer than ``radius_px``, the lower score goes."""
+    from scipy.spatial import cKDTree
+
+    keep = np.ones(uv.shape[0], bool)
+    if uv.shape[0] > 1:
+        pairs = cKDTree(uv).query_pairs(radius_px, output_type="ndarray")
+        if pairs.size:
+            a, b = pairs[:, 0], pairs[:, 1]
+            keep[np.where((score[a] < score[b]) | ((score[a] == score[b]) & (a > b)), a, b)] = False
+    return np.nonzero(keep)[0]
+
+
+def _plane_silhouettes(trans_k, threshold, seeds, grad_k, rows, cols):
+    """In one plane: the connected dark silhouette (darkness > threshold) holding each seed
+    pixel; per seed: mean Tenengrad over the silhouette's edge pixels (the edge sharpness),
+    and the silhouette's area, darkness-weighted first moments and area second moments."""
+    from scipy import ndimage
+
+    dark = np.clip(1.0 - trans_k, 0.0, 1.0)
+    mask = dark > threshold
+    comp, _ = ndimage.label(mask)
+    cid = comp[seeds[:, 0], seeds[:, 1]]
+    out = np.zeros((10, seeds.shape[0]))
+    ok = cid > 0
+    if not ok.any():
+        return out
+    c = cid[ok]
+    edge = np.where(mask & ~ndimage.binary_erosion(mask), comp, 0)
+    n_edge = ndimage.sum_labels(edge > 0, edge, c)
+    out[0, ok] = np.where(n_edge > 0, ndimage.sum_labels(grad_k, edge, c) / np.maximum(n_edge, 1), 0.0)
+    out[1, ok] = ndimage.sum_labels(mask, comp, c)
+    out[2, ok] = ndimage.sum_labels(dark, comp, c)
+    out[3, ok] = ndimage.sum_labels(dark * cols, comp, c)
+    out[4, ok] = ndimage.sum_labels(dark * rows, comp, c)
+    m = mask.astype(np.float64)
+    out[5, ok] = ndimage.sum_labels(m * cols, comp, c)
+    out[6, ok] = ndimage.sum_labels(m * rows, comp, c)
+    out[7, ok] = ndimage.sum_labels(m * cols * cols, comp, c)
+    out[8, ok] = ndimage.sum_labels(m * rows * rows, comp, c)
+    out[9, ok] = ndimage.sum_labels(m * cols * rows, comp, c)
+    return out
 
 
 def hybrid_detect(stack, z_mm, *, background=None, threshold: float = 0.5, min_area_px: int = 2,
-                  dilate_px: int = 2, split_touching: bool = True, min_separation_px: int = 2,
+                  split_touching: bool = True, min_separation_px: int = 2, min_peak_darkness: float = 0.0,
                   dewarp: Dewarp | None = None, pixel_to_stack=None) -> BacklitDetections:
     """Detect, locate and size backlit particles in a focal stack (see the module notes).
 
     stack : (n_z, H, W) refocused intensities; z_mm : (n_z,) their depths (monotonic).
     background : the same stack of the empty (white) scene, or a scalar; pixels it leaves
         at 0 (no views) count as background. Default: the stack's median.
-    threshold : darkness (1 - transmittance) a particle's pixels must exceed in the
-        minimum-intensity map.
-    split_touching : separate touching silhouettes by a distance-transform watershed
-        (markers at least ``min_separation_px`` apart); each part is sized by its area.
-    pixel_to_stack : optional (u_index, v_index) -> (u, v) map from stack indices to the
-        pixel coordinates the dewarp was fitted in (e.g. the light field's s_px, t_px).
+    threshold : darkness (1 - transmittance) a particle's pixels must exceed.
+    split_touching : separate touching silhouettes of the minimum map by a
+        distance-transform watershed (markers at least ``min_separation_px`` apart).
+    min_peak_darkness : keep only regions whose darkest pixel exceeds this (holograms: an
+        opaque particle in focus is nearly black).
+    dewarp, pixel_to_stack : a :class:`Dewarp` for world positions and diameters, and the
+        map from stack indices to the pixel coordinates it was fitted in.
+
+    Steps: the minimum-intensity map is segmented (regions whose centroid falls outside
+    them, the annular dark fringes of defocused planes, are dropped); each region's
+    centroid seeds, in every plane, the connected dark silhouette holding it; the depth is
+    the plane of the largest edge sharpness (mean Tenengrad over that silhouette's edge
+    pixels), refined by a 3-point Gaussian between planes; centre (darkness-weighted),
+    area, equivalent diameter and aspect ratio come from the silhouette in that plane.
     """
     from scipy import ndimage
 
@@ -169,46 +238,63 @@ def hybrid_detect(stack, z_mm, *, background=None, threshold: float = 0.5, min_a
     dark = np.clip(1.0 - trans.min(axis=0), 0.0, 1.0)
     mask = dark > threshold
     labels, n = _split_touching(mask, min_separation_px) if split_touching else ndimage.label(mask)
+    empty = np.zeros(0)
+    nothing = BacklitDetections(np.zeros((0, 2)), empty, empty, empty, empty, empty,
+                                np.zeros((0, 3)) if dewarp else None, empty if dewarp else None)
+    if n == 0:
+        return nothing
     ids = np.arange(1, n + 1)
-    area = ndimage.sum_labels(mask, labels, ids) if n else np.zeros(0)
+    area = ndimage.sum_labels(mask, labels, ids)
     border = np.zeros(n + 1, bool)
     border[np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))] = True
     keep = (area >= int(min_area_px)) & ~border[1:]  # regions cut by the stack's edge are not measurable
-    ids, area = ids[keep], area[keep]
-    empty = np.zeros(0)
+    if min_peak_darkness > 0:
+        keep &= ndimage.maximum(dark, labels, ids) >= min_peak_darkness
+    ids = ids[keep]
     if ids.size == 0:
-        return BacklitDetections(np.zeros((0, 2)), empty, empty, empty, empty, empty,
-                                 np.zeros((0, 3)) if dewarp else None, empty if dewarp else None)
+        return nothing
     rows, cols = np.indices(dark.shape, dtype=np.float64)
     w = ndimage.sum_labels(dark, labels, ids)
     cu = ndimage.sum_labels(dark * cols, labels, ids) / w
     cv = ndimage.sum_labels(dark * rows, labels, ids) / w
-    # shape from the second moments of the segmented region
-    m = mask.astype(np.float64)
-    suu = ndimage.sum_labels(m * cols**2, labels, ids) / area - (ndimage.sum_labels(m * cols, labels, ids) / area) ** 2
-    svv = ndimage.sum_labels(m * rows**2, labels, ids) / area - (ndimage.sum_labels(m * rows, labels, ids) / area) ** 2
-    suv = ndimage.sum_labels(m * cols * rows, labels, ids) / area - (ndimage.sum_labels(m * cols, labels, ids) / area) * (
-        ndimage.sum_labels(m * rows, labels, ids) / area)
-    tr, det = suu + svv, suu * svv - suv**2
-    disc = np.sqrt(np.maximum(tr**2 / 4 - det, 0.0))
-    l1, l2 = tr / 2 + disc, np.maximum(tr / 2 - disc, 1e-12)
-    aspect = np.sqrt(np.maximum(l1, 1e-12) / l2)
-    # depth: Tenengrad summed over each dilated region, per plane
-    grown = ndimage.grey_dilation(np.where(np.isin(labels, ids), labels, 0), size=2 * int(dilate_px) + 1)
-    sharp = np.stack([ndimage.sum_labels(tenengrad(trans[k]), grown, ids) for k in range(z.size)])  # (n_z, N)
+    seeds = np.column_stack([np.clip(np.rint(cv).astype(int), 0, dark.shape[0] - 1),
+                             np.clip(np.rint(cu).astype(int), 0, dark.shape[1] - 1)])
+    own = labels[seeds[:, 0], seeds[:, 1]] == ids  # an annulus has its centroid in its hole
+    ids, seeds = ids[own], seeds[own]
+    if ids.size == 0:
+        return nothing
+    per = np.stack([_plane_silhouettes(trans[k], threshold, seeds, tenengrad(trans[k]), rows, cols)
+                    for k in range(z.size)])  # (n_z, 8, N)
+    sharp = per[:, 0, :]
+    found = sharp.max(axis=0) > 0
     k = np.argmax(sharp, axis=0)
     r = np.arange(ids.size)
+    zi = k.astype(np.float64)
     if z.size >= 3:
         kc = np.clip(k, 1, z.size - 2)
         off = _gauss3(sharp[kc - 1, r], sharp[kc, r], sharp[kc + 1, r])
-        off = np.where(k == kc, off, 0.0)  # a maximum at the stack's end stays there
-        zi = k + off
-    else:
-        zi = k.astype(np.float64)
+        zi = k + np.where(k == kc, off, 0.0)  # a maximum at the stack's end stays there
     zs = np.interp(zi, np.arange(z.size), z)
-    diam = 2.0 * np.sqrt(area / np.pi)
-    det_ = BacklitDetections(np.column_stack([cu, cv]), zs, area.astype(np.float64), diam, aspect,
-                             ndimage.maximum(dark, labels, ids))
+    a_, w_, su, sv, au, av, suu, svv, suv = (per[k, j, r] for j in range(1, 10))
+    sel = found & (a_ >= int(min_area_px))
+    a_, w_, su, sv, au, av, suu, svv, suv, zs = (x[sel] for x in (a_, w_, su, sv, au, av, suu, svv, suv, zs))
+    cu, cv = su / w_, sv / w_
+    # several minimum-map regions (fragments of one particle's fringes) can seed the same
+    # silhouette: within one pixel in the plane, keep the sharpest
+    best = sharp.max(axis=0)[sel]
+    uniq = _dedupe(np.column_stack([cu, cv]), best)
+    a_, w_, au, av, suu, svv, suv, zs, cu, cv = (x[uniq] for x in (a_, w_, au, av, suu, svv, suv, zs, cu, cv))
+    seed_sel = seeds[sel][uniq]
+    mu_u, mu_v = au / a_, av / a_
+    cuu = np.maximum(suu / a_ - mu_u**2, 0.0)
+    cvv = np.maximum(svv / a_ - mu_v**2, 0.0)
+    cuv = suv / a_ - mu_u * mu_v
+    tr, det = cuu + cvv, cuu * cvv - cuv**2
+    disc = np.sqrt(np.maximum(tr**2 / 4 - det, 0.0))
+    l1, l2 = tr / 2 + disc, np.maximum(tr / 2 - disc, 1e-12)
+    aspect = np.sqrt(np.maximum(l1, 1e-12) / l2)
+    diam = 2.0 * np.sqrt(a_ / np.pi)
+    det_ = BacklitDetections(np.column_stack([cu, cv]), zs, a_, diam, aspect, dark[seed_sel[:, 0], seed_sel[:, 1]])
     if dewarp is not None:
         uv = det_.uv_px if pixel_to_stack is None else np.column_stack(pixel_to_stack(cu, cv))
         uvz = np.column_stack([uv, zs])
