@@ -25,6 +25,7 @@ bench: setup
 	$(PY) bench/bench_lightfield.py
 	$(PY) bench/bench_reconstruct.py
 	$(PY) bench/bench_analysis.py
+	$(PY) bench/bench_holography.py
 
 clean:
 	rm -rf out .pytest_cache

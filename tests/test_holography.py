@@ -27,7 +27,7 @@ def fresnel_intensity(rho, a, z):
 
 def pixel_average(fn, x, y, p):
     g, w = np.polynomial.legendre.leggauss(3)
-    return sum(wi * wj * fn(np.hypot(x + gi * p / 2, y + gj * p / 2)) for gi, wi in zip(g, w) for gj, wj in zip(g, w)) / 4
+    return sum(wi * wj * fn(np.hypot(x + gi * p / 2, y + gj * p / 2)) for gi, wi in zip(g, w, strict=True) for gj, wj in zip(g, w, strict=True)) / 4
 
 
 def test_disk_hologram_matches_fresnel_quadrature():
@@ -172,6 +172,17 @@ def test_sensor_model_edge_cut_and_overlap(droplet_hologram):
     det2 = ho.detect(h2, np.arange(4.0, 9.0, 0.1))
     assert np.all(np.isfinite(det2.positions_mm))
     assert np.min(np.abs(det2.positions_mm[:, 0] - 0.89)) > 0.05  # the cut one is not reported as whole
+    near_pair = np.hypot(det2.positions_mm[:, 0] - 0.025, det2.positions_mm[:, 1]) < 0.1
+    assert 1 <= near_pair.sum() <= 2  # the overlapping pair: one merged silhouette or both, no fragments
+
+
+def test_focal_stack_streams_to_npy(tmp_path, droplet_hologram):
+    _, _, h = droplet_hologram
+    z = np.linspace(5.0, 6.0, 4)
+    mm = ho.focal_stack(h, z, out=tmp_path / "stack.npy")
+    np.testing.assert_allclose(np.asarray(mm), ho.focal_stack(h, z), rtol=1e-6)
+    with pytest.raises(ConfigError, match="background"):
+        ho.focal_stack(h, z, background=0.0)
 
 
 def test_dih_finds_more_small_droplets_than_plenoptic():
