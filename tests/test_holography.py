@@ -214,3 +214,16 @@ def test_dih_finds_more_small_droplets_than_plenoptic():
     assert dih["detected_fraction"] >= 0.9
     assert len(plen) < dih["n_matched"]
     assert math.isfinite(dih["depth_rms_diameters"])
+
+
+def test_weak_phase_objects_conserve_the_beam_energy():
+    p = np.array([[0.0, 0.0, -5.0]])
+    kw = dict(sensor_z_mm=0.0, pixel_um=2.0, resolution=(256, 256), oversample=2, guard_mm=0.3)
+    opaque = ho.record(p, 0.1, **kw).image
+    weak = ho.record(p, 0.1, phase_index=1.0005, **kw).image  # k (n - 1) d = 0.59 rad at the centre
+    blocked = np.pi * 0.05**2 / (0.512**2)  # disk area over the sensor area
+    # tolerance: light diffracted outside the sensor (a few 1e-3 of the mean)
+    assert opaque.mean() == pytest.approx(1 - blocked, abs=5e-3)
+    assert weak.mean() == pytest.approx(1.0, abs=5e-3)  # |t| = 1: nothing absorbed
+    # a weak phase object leaves a weaker hologram than the opaque disk (contrast ~ 2 x phase)
+    assert 0.05 < np.abs(weak - 1).max() < 2 * 0.59 + 0.1
