@@ -4,12 +4,15 @@ reconstruction alike): the hybrid detection, polynomial dewarping, two-frame mat
 Hybrid detection (as in the plenoptic vs digital-holography droplet studies): particles are
 opaque silhouettes on a bright, flat background. Each refocused plane is divided by the
 background (``transmittance`` 1 = background, 0 = opaque). The minimum-intensity map
-over the stack shows every particle at its sharpest, so it is segmented once (darkness
-above ``threshold``, default half-way between background and opaque) for the in-plane
-position (darkness-weighted centroid) and the shape (area, equivalent diameter, aspect
-ratio from the second moments). The depth is where the Tenengrad edge sharpness (squared
-Sobel gradient) summed over the particle's dilated region peaks along the stack, refined
-by a 3-point Gaussian fit between planes. A :class:`Dewarp` polynomial fitted to a dot card
+over the stack shows every particle dark, so it is segmented once (darkness above
+``threshold``, default half-way between background and opaque; touching silhouettes split
+by a distance-transform watershed; annuli, the dark fringes of defocused planes, dropped)
+to seed the particles. In every plane, the connected dark silhouette holding a seed gives
+an edge sharpness (mean Tenengrad, the squared Sobel gradient, over its edge pixels); the
+depth is the plane where it peaks, refined by a 3-point Gaussian between planes, and the
+in-plane position (darkness-weighted centroid), area, equivalent diameter and aspect
+ratio come from the silhouette in that plane. Particles touching at the same depth share
+that silhouette and are reported once. A :class:`Dewarp` polynomial fitted to a dot card
 imaged at several depths maps (u, v, z_stack) to world millimetres.
 
 Everything is vectorised over particles (``scipy.ndimage`` label statistics); the only
@@ -162,8 +165,9 @@ def _dedupe(uv, score, radius_px=1.0):
 
 def _plane_silhouettes(trans_k, threshold, seeds, grad_k, rows, cols):
     """In one plane: the connected dark silhouette (darkness > threshold) holding each seed
-    pixel; per seed: mean Tenengrad over the silhouette's edge pixels (the edge sharpness),
-    and the silhouette's area, darkness-weighted first moments and area second moments."""
+    pixel. Per seed (rows of the returned (10, N) array): mean Tenengrad over the
+    silhouette's edge pixels (the edge sharpness), area, darkness sum, darkness-weighted
+    first moments, area first and second moments."""
     from scipy import ndimage
 
     dark = np.clip(1.0 - trans_k, 0.0, 1.0)
