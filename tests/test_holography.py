@@ -105,6 +105,12 @@ def test_sampling_checks_and_bad_inputs():
         ho.record(p, 0.05, sensor_z_mm=0.0, pixel_um=5.5, resolution=(64, 64), guard_mm=0.01)
     with pytest.raises(ConfigError, match="before the sensor"):
         ho.record(np.array([[0.0, 0.0, 1.0]]), 0.05, sensor_z_mm=0.0, pixel_um=5.5, resolution=(64, 64))
+    with pytest.raises(ConfigError, match="guard_mm"):
+        ho.record(p, 0.05, sensor_z_mm=0.0, guard_mm=-1.0)
+    with pytest.raises(ConfigError, match="resolution"):
+        ho.record(p, 0.05, sensor_z_mm=0.0, resolution=512)
+    with pytest.raises(ConfigError, match="plane_tolerance_mm"):
+        ho.record(p, 0.05, sensor_z_mm=0.0, plane_tolerance_mm=-0.1)
     with pytest.raises(ConfigError, match="diameters_mm"):
         ho.record(p, None, sensor_z_mm=0.0)
     with pytest.raises(ConfigError, match="wavelength_nm"):

@@ -175,7 +175,13 @@ def record(particles, diameters_mm=None, *, sensor_z_mm: float, wavelength_nm: f
         the pixel intensities.
     """
     pos, d = _particles(particles, diameters_mm)
+    if np.ndim(resolution) != 1 or len(resolution) != 2:
+        raise ConfigError(f"record: resolution must be (width, height) in pixels, got {resolution!r}.")
     W, H = (int(v) for v in resolution)
+    if guard_mm is not None and not (np.isfinite(guard_mm) and guard_mm >= 0):
+        raise ConfigError(f"record: guard_mm must be >= 0 mm (or None for the default), got {guard_mm!r}.")
+    if not (np.isfinite(plane_tolerance_mm) and plane_tolerance_mm >= 0):
+        raise ConfigError(f"record: plane_tolerance_mm must be >= 0 mm, got {plane_tolerance_mm!r}.")
     if W < 8 or H < 8:
         raise ConfigError(f"record: resolution must be at least 8x8 pixels, got {resolution!r}.")
     if int(oversample) != oversample or oversample < 1:
