@@ -1,5 +1,5 @@
 """Command-line interface: ``mitpiv render``, ``info``, ``sensor``, ``decode``, ``refocus``,
-``reconstruct``, ``evaluate`` and ``piv``.
+``reconstruct``, ``evaluate``, ``piv`` and ``run``.
 
 Thin: parses arguments, calls library functions, shows progress. Errors from mitpiv
 print as one line and exit with status 2.
@@ -319,6 +319,18 @@ def cmd_piv(args) -> int:
     return 0
 
 
+def cmd_run(args) -> int:
+    from mitpiv.studies import run_experiment
+
+    m = run_experiment(args.experiment, args.out)
+    pv = m.get("piv") or {}
+    ev = (m.get("evaluate") or {}).get("frame0", {})
+    print(f"{m['name']}: Q {ev.get('Q', float('nan')):.3f}, particles detected "
+          f"{100 * ev.get('particles', {}).get('detection_rate', float('nan')):.1f} %, PIV RMS error "
+          f"{', '.join(f'{x:.4f}' for x in pv.get('rms_vox', []))} voxels -> {args.out}/report/report.md")
+    return 0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="mitpiv", description="Physically based rendering testbed for volumetric PIV.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -414,6 +426,10 @@ def main(argv=None) -> int:
     v.add_argument("--truth", default=None, help="truth .npz with the flow: velocity error against it")
     v.add_argument("--frame", type=int, default=0, help="truth frame of vol_a")
     v.set_defaults(func=cmd_piv)
+    x = sub.add_parser("run", help="run (or resume) an experiment TOML: render, reconstruct, evaluate, PIV, report")
+    x.add_argument("experiment", help="experiment .toml")
+    x.add_argument("--out", required=True, help="run folder (stages resume when rerun)")
+    x.set_defaults(func=cmd_run)
     args = p.parse_args(argv)
     try:
         return args.func(args)

@@ -1,0 +1,378 @@
+"""Experiment runner: one TOML file takes a PIV experiment from particles to an evaluated
+reconstruction and vector field, in a run folder of stages that are written atomically
+and resumed when rerun.
+
+Experiment file (paths relative to it; every table but ``scene`` optional)::
+
+    name = "tomo4-small"
+    seed = 0
+    [scene]            xml = "scene.xml"; params = { resolution = 256 }
+    [seeding]          box_min_mm, box_max_mm, count | concentration_per_mm3, diameter_um,
+                       distribution, geometric_std, min_separation_mm, proxy_radius_mm
+    [flow]             kind = "vortex_ring", ... (mitpiv.physics.flows), dt_s
+    [render]           spp
+    [sensor]           SensorModel fields (bit_depth, peak_photons, shot_noise, ...)
+    [reconstruction]   method (mlos | mart | smart | sapiv), bounds_mm (6), voxel_mm,
+                       iterations, mu, weights, interpolation
+    [piv]              windows, overlap, deform, interpolation
+    [particles]        method, threshold_rel, radius_voxels
+
+Stages, each a sub-folder of the run folder completed by renaming a temporary folder
+(a killed run leaves no half-written stage; a rerun skips the stages whose inputs did
+not change): ``particles`` (seeding, advection, PLY files, truth), ``render`` (EXR per
+camera and frame), ``sensor`` (counts, only with a [sensor] table), ``reconstruct``
+(volume per frame), ``evaluate`` (particles and quality per frame), ``piv`` (vector field
+and its error against the flow), ``report`` (report.md and PNG plots). ``metrics.json``
+and ``timings.json`` (wall time per stage) are written at the end.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from mitpiv.errors import ConfigError
+
+STAGES = ("particles", "render", "sensor", "reconstruct", "evaluate", "piv", "report")
+_TABLES = {"scene", "seeding", "flow", "render", "sensor", "reconstruction", "piv", "particles"}
+_TOP = {"name", "seed"} | _TABLES
+
+
+def load_experiment(path) -> dict:
+    """Read and check an experiment TOML file; returns the config with absolute paths."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"experiment file {str(path)!r} does not exist.")
+    try:
+        cfg = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"experiment file {str(path)!r} is not valid TOML: {e}.") from None
+    unknown = set(cfg) - _TOP
+    if unknown:
+        raise ConfigError(f"experiment {path.name}: unknown key(s) {sorted(unknown)}; expected {sorted(_TOP)}.")
+    if "scene" not in cfg or "xml" not in cfg["scene"]:
+        raise ConfigError(f"experiment {path.name}: [scene] needs xml = \"path/to/scene.xml\".")
+    xml = (path.parent / cfg["scene"]["xml"]).resolve()
+    if not xml.is_file():
+        raise ConfigError(f"experiment {path.name}: [scene] xml = {cfg['scene']['xml']!r} does not exist "
+                          f"(resolved to {xml}).")
+    cfg["scene"]["xml"] = str(xml)
+    cfg.setdefault("name", path.stem)
+    cfg.setdefault("seed", 0)
+    if not isinstance(cfg["seed"], int) or cfg["seed"] < 0:
+        raise ConfigError(f"experiment {path.name}: seed must be an integer >= 0, got {cfg['seed']!r}.")
+    for t in _TABLES - {"sensor"}:
+        cfg.setdefault(t, {})
+    if "dt_s" not in cfg["flow"]:
+        raise ConfigError(f"experiment {path.name}: [flow] needs dt_s (the time between the two frames).")
+    if "bounds_mm" not in cfg["reconstruction"] or len(cfg["reconstruction"]["bounds_mm"]) != 6:
+        raise ConfigError(f"experiment {path.name}: [reconstruction] needs bounds_mm = [xmin, xmax, ymin, ymax, zmin, zmax].")
+    if "voxel_mm" not in cfg["reconstruction"]:
+        raise ConfigError(f"experiment {path.name}: [reconstruction] needs voxel_mm (one size or [dx, dy, dz]).")
+    return cfg
+
+
+def _hash(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+class _Stage:
+    """A stage folder completed atomically: work in ``<name>.tmp``, then rename."""
+
+    def __init__(self, run_dir: Path, name: str, key: str):
+        self.final = run_dir / name
+        self.tmp = run_dir / f".{name}.tmp"
+        self.key = key
+
+    def done(self) -> bool:
+        m = self.final / "stage.json"
+        return m.is_file() and json.loads(m.read_text()).get("key") == self.key
+
+    def __enter__(self) -> Path:
+        shutil.rmtree(self.tmp, ignore_errors=True)
+        self.tmp.mkdir(parents=True)
+        return self.tmp
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is not None:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            return False
+        (self.tmp / "stage.json").write_text(json.dumps({"key": self.key}))
+        old = self.final.with_name(f".{self.final.name}.old")
+        shutil.rmtree(old, ignore_errors=True)
+        if self.final.exists():
+            os.replace(self.final, old)
+        os.replace(self.tmp, self.final)
+        shutil.rmtree(old, ignore_errors=True)
+        return False
+
+
+def _log(msg):
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _stage_particles(cfg, out: Path):
+    from mitpiv.io import write_particles_ply, write_truth
+    from mitpiv.physics.advection import advect
+    from mitpiv.physics.flows import flow_from_dict
+    from mitpiv.physics.seeding import seed_box
+
+    s = dict(cfg["seeding"])
+    box_min = s.pop("box_min_mm", None)
+    box_max = s.pop("box_max_mm", None)
+    if box_min is None or box_max is None:
+        raise ConfigError("experiment: [seeding] needs box_min_mm and box_max_mm.")
+    proxy = float(s.pop("proxy_radius_mm", 0.02))
+    particles = seed_box(box_min, box_max, seed=cfg["seed"], **s)
+    f = dict(cfg["flow"])
+    dt = float(f.pop("dt_s"))
+    flow = flow_from_dict(f)
+    p1 = advect(particles.positions_mm, flow, dt_s=dt, t0_s=0.0, substeps=8)
+    for k, p in enumerate((particles.positions_mm, p1)):
+        write_particles_ply(out / f"particles_{k}.ply", p, particles.diameters_um, proxy_radius_mm=proxy)
+    write_truth(out / "truth.npz", positions_mm=[particles.positions_mm, p1], times_s=[0.0, dt],
+                diameters_um=particles.diameters_um, flow=flow.to_dict(), extra={"seed": cfg["seed"]})
+    # the scene reads particles_$frame.ply beside itself: the run gets its own copy of the XML
+    shutil.copy(cfg["scene"]["xml"], out / "scene.xml")
+    return {"n_particles": len(particles)}
+
+
+def _stage_render(cfg, run: Path, out: Path):
+    from mitpiv.render.render import render_scene
+
+    files = render_scene(run / "particles" / "scene.xml", out_dir=out, frames=(0, 1),
+                         params=cfg["scene"].get("params"), spp=cfg["render"].get("spp"), seed=cfg["seed"],
+                         progress=True)
+    return {"images": [f.name for f in files]}
+
+
+def _images(run: Path, frame: int, source: str):
+    from mitpiv.io import read_exr
+
+    files = sorted((run / source).glob(f"*_frame{frame:03d}.exr"))
+    if not files:
+        raise ConfigError(f"experiment: no images of frame {frame} in {run / source}.")
+    data = [read_exr(f) for f in files]
+    return [np.asarray(img if img.ndim == 2 else img[..., 0], dtype=np.float64) for img, _ in data], \
+        [m for _, m in data], files
+
+
+def _stage_sensor(cfg, run: Path, out: Path):
+    from mitpiv.imaging import SensorModel, apply_sensor
+    from mitpiv.io import write_exr
+
+    model = SensorModel(**cfg["sensor"])
+    for frame in (0, 1):
+        imgs, metas, files = _images(run, frame, "render")
+        for img, meta, f in zip(imgs, metas, files, strict=True):
+            counts = apply_sensor(img, model, seed=cfg["seed"] * 1000 + frame)
+            write_exr(out / f.name, np.asarray(counts, dtype=np.float32), {**meta, "sensor": model.to_dict()})
+    return {}
+
+
+def _grid(cfg):
+    from mitpiv.reconstruct import VoxelGrid
+
+    b = cfg["reconstruction"]["bounds_mm"]
+    return VoxelGrid.from_bounds((b[0], b[2], b[4]), (b[1], b[3], b[5]), cfg["reconstruction"]["voxel_mm"])
+
+
+def _stage_reconstruct(cfg, run: Path, out: Path, source: str):
+    from mitpiv import reconstruct as rc
+
+    r = dict(cfg["reconstruction"])
+    method = r.get("method", "mart")
+    grid = _grid(cfg)
+    info = {}
+    for frame in (0, 1):
+        imgs, metas, _ = _images(run, frame, source)
+        maps = [rc.mapping_from_metadata(m) for m in metas]
+        if method == "mlos":
+            vol = rc.mlos(imgs, maps, grid, interpolation=r.get("interpolation", "linear"))
+        elif method == "sapiv":
+            vol = rc.sapiv_refocus(imgs, maps, grid, method=r.get("combine", "multiplicative"),
+                                   interpolation=r.get("interpolation", "linear"))
+        elif method in ("mart", "smart"):
+            vol, inf = rc.mart(imgs, maps, grid, iterations=int(r.get("iterations", 5)), mu=float(r.get("mu", 1.0)),
+                               smart=method == "smart", weights=r.get("weights", "circle"),
+                               interpolation=r.get("interpolation", "linear"), progress=True, return_info=True)
+            info[f"frame{frame}"] = {k: v for k, v in inf.items() if isinstance(v, int | float | str)}
+        else:
+            raise ConfigError(f"experiment: [reconstruction] method = {method!r} is not one of mlos, mart, smart, sapiv.")
+        with open(out / f"volume_{frame}.npz", "wb") as fh:
+            np.savez_compressed(fh, volume=vol, meta=json.dumps({"method": method, "grid": grid.to_dict()}))
+    return info
+
+
+def _volume(run: Path, frame: int):
+    with np.load(run / "reconstruct" / f"volume_{frame}.npz") as z:
+        return z["volume"]
+
+
+def _stage_evaluate(cfg, run: Path, out: Path):
+    from mitpiv import analysis
+    from mitpiv.io import read_truth
+
+    p = cfg["particles"]
+    grid = _grid(cfg)
+    truth = read_truth(run / "particles" / "truth.npz")
+    metrics = {}
+    for frame in (0, 1):
+        vol = _volume(run, frame)
+        pos = truth["positions_mm"][frame]
+        tv = analysis.truth_volume(pos, grid)
+        found = analysis.find_particles(vol, grid, method=p.get("method", "gauss3"),
+                                        threshold_rel=float(p.get("threshold_rel", 0.1)))
+        res = analysis.match(found, pos, grid=grid, radius_voxels=float(p.get("radius_voxels", 2.0)))
+        metrics[f"frame{frame}"] = {"Q": analysis.quality_q(vol, tv), "Q*": analysis.quality_q_zero_mean(vol, tv),
+                                    "Q'": analysis.rank_correlation(vol, tv), "SNR": analysis.plane_snr(vol),
+                                    "particles": res.summary()}
+        res.plot(out / f"particle_errors_{frame}.png", title=f"frame {frame} particle position error")
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    return metrics
+
+
+def _stage_piv(cfg, run: Path, out: Path):
+    from mitpiv import analysis
+    from mitpiv.io import read_truth
+    from mitpiv.physics.flows import flow_from_dict
+
+    grid = _grid(cfg)
+    truth = read_truth(run / "particles" / "truth.npz")
+    dt = float(truth["times_s"][1] - truth["times_s"][0])
+    pv = dict(cfg["piv"])
+    field = analysis.piv3d(_volume(run, 0), _volume(run, 1), grid, windows=pv.get("windows", (64, 48, 32)),
+                           overlap=pv.get("overlap", 0.75), deform=bool(pv.get("deform", True)),
+                           interpolation=pv.get("interpolation", "cubic"), dt_s=dt, progress=True)
+    res = analysis.velocity_error(field, flow_from_dict(truth["flow"]))
+    keys = ("rms", "bias", "rms_vox", "bias_vox", "rms_magnitude", "n", "outlier_ratio", "units")
+    metrics = {k: res[k] for k in keys}
+    field.info["velocity_error"] = metrics
+    field.save(out / "field.npz")
+    analysis.plot_velocity_error(field, res, out / "velocity_error.png")
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    return metrics
+
+
+def _stage_report(cfg, run: Path, out: Path, metrics: dict, timings: dict, source: str):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    imgs, _, files = _images(run, 0, source)
+    fig, axs = plt.subplots(1, len(imgs), figsize=(3.2 * len(imgs), 3.2), squeeze=False)
+    for ax, img, f in zip(axs[0], imgs, files, strict=True):
+        ax.imshow(img, cmap="gray", vmax=np.percentile(img, 99.9) or None)
+        ax.set_title(f.stem, fontsize=8)
+        ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(out / "sensor_images.png", dpi=90)
+    plt.close(fig)
+    vol = _volume(run, 0)
+    fig, axs = plt.subplots(1, 2, figsize=(9, 4))
+    axs[0].imshow(vol.max(axis=0), cmap="magma", origin="lower")
+    axs[0].set_title("frame 0 volume, max along z")
+    axs[1].imshow(vol.max(axis=1), cmap="magma", origin="lower", aspect="auto")
+    axs[1].set_title("max along y")
+    fig.tight_layout()
+    fig.savefig(out / "volume_projections.png", dpi=90)
+    plt.close(fig)
+    for name in ("particle_errors_0.png", "particle_errors_1.png"):
+        shutil.copy(run / "evaluate" / name, out / name)
+    shutil.copy(run / "piv" / "velocity_error.png", out / "velocity_error.png")
+    ev, pv = metrics["evaluate"], metrics["piv"]
+    lines = [f"# {cfg['name']}", "", f"Scene `{Path(cfg['scene']['xml']).name}`, seed {cfg['seed']}, "
+             f"method {cfg['reconstruction'].get('method', 'mart')}.", "", "## Reconstruction and particles", "",
+             "| frame | Q | Q* | Q' | SNR | detected | ghosts | u95 x / y / z [voxels] |", "|---|---|---|---|---|---|---|---|"]
+    for frame in (0, 1):
+        m = ev[f"frame{frame}"]
+        pr = m["particles"]
+        u = pr.get("u95_vox", [float("nan")] * 3)
+        q_rank = m["Q'"]
+        lines.append(f"| {frame} | {m['Q']:.3f} | {m['Q*']:.3f} | {q_rank:.3f} | {m['SNR']:.1f} | "
+                     f"{100 * pr['detection_rate']:.1f} % | {100 * pr['ghost_fraction']:.1f} % | "
+                     f"{u[0]:.3f} / {u[1]:.3f} / {u[2]:.3f} |")
+    r, b = pv["rms_vox"], pv["bias_vox"]
+    lines += ["", "## 3D PIV", "", f"{pv['n']} vectors, outlier ratio {100 * pv['outlier_ratio']:.2f} %.", "",
+              "| | u | v | w |", "|---|---|---|---|",
+              f"| RMS error [voxels] | {r[0]:.4f} | {r[1]:.4f} | {r[2]:.4f} |",
+              f"| bias [voxels] | {b[0]:+.4f} | {b[1]:+.4f} | {b[2]:+.4f} |", "", "## Wall time per stage", "",
+              "| stage | seconds |", "|---|---|"]
+    lines += [f"| {k} | {v:.1f} |" for k, v in timings.items()]
+    lines += ["", "![sensor images](sensor_images.png)", "", "![volume](volume_projections.png)", "",
+              "![particle errors](particle_errors_0.png)", "", "![velocity error](velocity_error.png)", ""]
+    (out / "report.md").write_text("\n".join(lines))
+    return {}
+
+
+def run_experiment(path, out_dir) -> dict:
+    """Run (or resume) the experiment in ``path`` into ``out_dir``; returns the metrics.
+
+    Each stage is skipped when its folder holds a completion record with the same inputs
+    (the experiment's settings that reach it); a changed setting reruns that stage and
+    the ones after it. The same seed gives the same metrics.
+    """
+    cfg = load_experiment(path)
+    run = Path(out_dir)
+    run.mkdir(parents=True, exist_ok=True)
+    (run / "experiment.json").write_text(json.dumps(cfg, indent=2, default=str))
+    source = "sensor" if "sensor" in cfg else "render"
+    keys, prev = {}, ""
+    parts = {"particles": ("seed", "seeding", "flow", "scene"), "render": ("scene", "render"), "sensor": ("sensor",),
+             "reconstruct": ("reconstruction",), "evaluate": ("particles",), "piv": ("piv",), "report": ()}
+    for st in STAGES:
+        if st == "sensor" and source != "sensor":
+            continue
+        prev = _hash([prev] + [cfg.get(p) for p in parts[st]])
+        keys[st] = prev
+    timings, metrics = {}, {}
+    for st in keys:
+        stage = _Stage(run, st, keys[st])
+        if stage.done():
+            _log(f"[{cfg['name']}] {st}: done earlier, skipped")
+            saved = stage.final / "stage_result.json"
+            if saved.is_file():
+                metrics[st] = json.loads(saved.read_text())
+            t_file = stage.final / "seconds.txt"
+            timings[st] = float(t_file.read_text()) if t_file.is_file() else 0.0
+            continue
+        _log(f"[{cfg['name']}] {st} ...")
+        t0 = time.perf_counter()
+        with stage as tmp:
+            if st == "particles":
+                result = _stage_particles(cfg, tmp)
+            elif st == "render":
+                result = _stage_render(cfg, run, tmp)
+            elif st == "sensor":
+                result = _stage_sensor(cfg, run, tmp)
+            elif st == "reconstruct":
+                result = _stage_reconstruct(cfg, run, tmp, source)
+            elif st == "evaluate":
+                result = _stage_evaluate(cfg, run, tmp)
+            elif st == "piv":
+                result = _stage_piv(cfg, run, tmp)
+            else:
+                result = _stage_report(cfg, run, tmp, metrics, timings, source)
+            el = time.perf_counter() - t0
+            (tmp / "stage_result.json").write_text(json.dumps(result, indent=2, default=float))
+            (tmp / "seconds.txt").write_text(f"{el:.3f}")
+        timings[st] = el
+        metrics[st] = json.loads((run / st / "stage_result.json").read_text())
+        _log(f"[{cfg['name']}] {st}: {el:.1f} s")
+    from mitpiv.io.atomic import atomic_path
+
+    out = {"name": cfg["name"], "seed": cfg["seed"], "evaluate": metrics.get("evaluate"), "piv": metrics.get("piv"),
+           "n_particles": metrics.get("particles", {}).get("n_particles")}
+    for name, obj in (("metrics.json", out), ("timings.json", timings)):
+        with atomic_path(run / name) as tmp:
+            tmp.write_text(json.dumps(obj, indent=2, default=float))
+    return out
