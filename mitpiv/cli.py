@@ -1,5 +1,5 @@
 """Command-line interface: ``mitpiv render``, ``info``, ``sensor``, ``decode``, ``refocus``,
-``reconstruct``, ``evaluate``, ``piv`` and ``run``.
+``reconstruct``, ``evaluate``, ``piv``, ``run`` and ``sweep``.
 
 Thin: parses arguments, calls library functions, shows progress. Errors from mitpiv
 print as one line and exit with status 2.
@@ -331,6 +331,17 @@ def cmd_run(args) -> int:
     return 0
 
 
+def cmd_sweep(args) -> int:
+    from mitpiv.studies import run_sweep
+
+    df = run_sweep(args.study, args.out, scheduler=args.scheduler, workers=args.workers)
+    ok = int((df["status"] == "ok").sum())
+    print(f"{ok}/{len(df)} points ok -> {args.out}/results.csv, results.parquet")
+    for _, row in df[df["status"] != "ok"].iterrows():
+        print(f"  failed {row['point']}: {row['error']}")
+    return 0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="mitpiv", description="Physically based rendering testbed for volumetric PIV.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -430,6 +441,12 @@ def main(argv=None) -> int:
     x.add_argument("experiment", help="experiment .toml")
     x.add_argument("--out", required=True, help="run folder (stages resume when rerun)")
     x.set_defaults(func=cmd_run)
+    w = sub.add_parser("sweep", help="run a parameter study (grid or list of experiment overrides) on Dask")
+    w.add_argument("study", help="study .toml")
+    w.add_argument("--out", required=True, help="sweep folder (results table, one run folder per point)")
+    w.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (default: a local cluster)")
+    w.add_argument("--workers", type=int, default=None, help="local cluster worker processes (default 2)")
+    w.set_defaults(func=cmd_sweep)
     args = p.parse_args(argv)
     try:
         return args.func(args)

@@ -46,15 +46,23 @@ _TABLES = {"scene", "seeding", "flow", "render", "sensor", "reconstruction", "pi
 _TOP = {"name", "seed"} | _TABLES
 
 
-def load_experiment(path) -> dict:
-    """Read and check an experiment TOML file; returns the config with absolute paths."""
+def read_toml(path, what: str = "experiment") -> dict:
     path = Path(path)
     if not path.is_file():
-        raise ConfigError(f"experiment file {str(path)!r} does not exist.")
+        raise ConfigError(f"{what} file {str(path)!r} does not exist.")
     try:
-        cfg = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"experiment file {str(path)!r} is not valid TOML: {e}.") from None
+        raise ConfigError(f"{what} file {str(path)!r} is not valid TOML: {e}.") from None
+
+
+def load_experiment(path, overrides: dict | None = None) -> dict:
+    """Read and check an experiment TOML file; returns the config with absolute paths.
+    ``overrides`` maps dotted keys ("scene.params.resolution") to values set before the checks."""
+    path = Path(path)
+    cfg = read_toml(path)
+    for key, value in (overrides or {}).items():
+        set_dotted(cfg, key, value)
     unknown = set(cfg) - _TOP
     if unknown:
         raise ConfigError(f"experiment {path.name}: unknown key(s) {sorted(unknown)}; expected {sorted(_TOP)}.")
@@ -78,6 +86,20 @@ def load_experiment(path) -> dict:
     if "voxel_mm" not in cfg["reconstruction"]:
         raise ConfigError(f"experiment {path.name}: [reconstruction] needs voxel_mm (one size or [dx, dy, dz]).")
     return cfg
+
+
+def set_dotted(cfg: dict, key: str, value) -> None:
+    """Set ``cfg["a"]["b"]["c"] = value`` for key "a.b.c", creating tables on the way."""
+    parts = str(key).split(".")
+    if not all(parts):
+        raise ConfigError(f"parameter name {key!r} is not a dotted key like 'reconstruction.iterations'.")
+    node = cfg
+    for p in parts[:-1]:
+        nxt = node.setdefault(p, {})
+        if not isinstance(nxt, dict):
+            raise ConfigError(f"parameter {key!r}: {p!r} is a value, not a table.")
+        node = nxt
+    node[parts[-1]] = value
 
 
 def _hash(obj) -> str:
@@ -321,7 +343,11 @@ def run_experiment(path, out_dir) -> dict:
     (the experiment's settings that reach it); a changed setting reruns that stage and
     the ones after it. The same seed gives the same metrics.
     """
-    cfg = load_experiment(path)
+    return run_config(load_experiment(path), out_dir)
+
+
+def run_config(cfg: dict, out_dir) -> dict:
+    """:func:`run_experiment` on an already loaded (and checked) experiment dict."""
     run = Path(out_dir)
     run.mkdir(parents=True, exist_ok=True)
     (run / "experiment.json").write_text(json.dumps(cfg, indent=2, default=str))

@@ -123,3 +123,51 @@ def test_bad_experiment_files(tmp_path, text, match):
     with pytest.raises(ConfigError, match=match):
         run_experiment(write(tmp_path, text), tmp_path / "run")
     assert not (tmp_path / "run" / "particles").exists()
+
+
+def test_sweep_on_a_local_cluster_records_a_failing_point(tmp_path):
+    import pandas as pd
+
+    from mitpiv.studies import run_sweep
+
+    write(tmp_path, BASE.replace("iterations = 3", "iterations = 1"))
+    study = write(tmp_path, """name = "iters"
+experiment = "exp.toml"
+[[points]]
+"reconstruction.iterations" = 1
+[[points]]
+"reconstruction.iterations" = 3
+[[points]]
+"reconstruction.method" = "tomo"
+[plot]
+x = "reconstruction.iterations"
+y = "frame0.Q"
+""", "study.toml")
+    df = run_sweep(study, tmp_path / "sweep", workers=2)
+    assert list(df["status"]) == ["ok", "ok", "error"]
+    assert "method" in df["error"].iloc[2] and df["frame0.Q"].iloc[:2].notna().all()
+    q = df["frame0.Q"].iloc[:2]
+    assert q.min() > 0.5 and q.iloc[0] != q.iloc[1]  # two reconstructions of the same seeded field
+    for p in df["point"].iloc[:2]:
+        assert (tmp_path / "sweep" / "points" / p / "report" / "report.md").is_file()
+    assert (tmp_path / "sweep" / "sweep.png").stat().st_size > 5000
+    table = pd.read_parquet(tmp_path / "sweep" / "results.parquet")
+    assert len(table) == 3 and set(pd.read_csv(tmp_path / "sweep" / "results.csv")["status"]) == {"ok", "error"}
+    # a rerun (here through the CLI) finds the finished points; only the failed one runs again
+    from mitpiv.cli import main
+
+    assert main(["sweep", str(study), "--out", str(tmp_path / "sweep"), "--workers", "1"]) == 0
+    df2 = pd.read_csv(tmp_path / "sweep" / "results.csv")
+    assert df2["frame0.Q"].iloc[:2].tolist() == df["frame0.Q"].iloc[:2].tolist()
+
+
+def test_bad_study_files(tmp_path):
+    from mitpiv.studies import run_sweep
+
+    write(tmp_path, BASE)
+    for text, match in (("experiment = \"exp.toml\"\n", "neither"),
+                        ("experiment = \"exp.toml\"\n[grid]\n\"seed\" = 3\n", "non-empty list"),
+                        ("[grid]\n\"seed\" = [1]\n", "base experiment"),
+                        ("experiment = \"exp.toml\"\nfoo = 1\n[grid]\n\"seed\" = [1]\n", "unknown key")):
+        with pytest.raises(ConfigError, match=match):
+            run_sweep(write(tmp_path, text, "s.toml"), tmp_path / "sw")
