@@ -1,4 +1,4 @@
-# mitpiv: `make demo` renders the default scene; `make test` runs the test suite.
+# mitpiv: `make demo` runs the default experiment; `make test` runs the test suite.
 # Both do all set-up first (virtualenv, dependencies, LLVM for Dr.Jit).
 PY := .venv/bin/python
 OUT ?= out/tomo4
@@ -9,8 +9,7 @@ setup:
 	@bash scripts/setup.sh
 
 demo: setup
-	$(PY) scenes/tomo4/make_particles.py
-	$(PY) -m mitpiv.cli render scenes/tomo4/scene.xml --out $(OUT) --frames 0 1
+	$(PY) -m mitpiv.cli run scenes/tomo4/experiment.toml --out $(OUT)
 
 test: setup
 	$(PY) -m pytest -q

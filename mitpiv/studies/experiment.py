@@ -301,10 +301,11 @@ def _stage_report(cfg, run: Path, out: Path, metrics: dict, timings: dict, sourc
     plt.close(fig)
     vol = _volume(run, 0)
     fig, axs = plt.subplots(1, 2, figsize=(9, 4))
-    axs[0].imshow(vol.max(axis=0), cmap="magma", origin="lower")
-    axs[0].set_title("frame 0 volume, max along z")
-    axs[1].imshow(vol.max(axis=1), cmap="magma", origin="lower", aspect="auto")
-    axs[1].set_title("max along y")
+    for ax, proj, title, aspect in ((axs[0], vol.max(axis=0), "frame 0 volume, max along z", "equal"),
+                                    (axs[1], vol.max(axis=1), "max along y", "auto")):
+        # a few bright voxels would hide the rest: the colour scale ends at the 99.5th percentile
+        ax.imshow(proj, cmap="magma", origin="lower", aspect=aspect, vmax=float(np.percentile(proj, 99.5)) or None)
+        ax.set_title(title)
     fig.tight_layout()
     fig.savefig(out / "volume_projections.png", dpi=90)
     plt.close(fig)

@@ -171,3 +171,27 @@ def test_bad_study_files(tmp_path):
                         ("experiment = \"exp.toml\"\nfoo = 1\n[grid]\n\"seed\" = [1]\n", "unknown key")):
         with pytest.raises(ConfigError, match=match):
             run_sweep(write(tmp_path, text, "s.toml"), tmp_path / "sw")
+
+
+def test_default_experiment_matches_the_scene_particles():
+    """The README's main command runs scenes/tomo4/experiment.toml: its particles and flow
+    are those of scenes/tomo4/make_particles.py (same seed, count, box, ring)."""
+    import importlib.util
+
+    from mitpiv.studies import load_experiment
+
+    cfg = load_experiment(SCENE.parent / "experiment.toml")
+    spec = importlib.util.spec_from_file_location("make_particles", SCENE.parent / "make_particles.py")
+    mp = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mp)
+    assert tuple(cfg["seeding"]["box_min_mm"]) == mp.BOX_MIN and tuple(cfg["seeding"]["box_max_mm"]) == mp.BOX_MAX
+    assert cfg["flow"]["dt_s"] == mp.DT_S and cfg["seeding"]["proxy_radius_mm"] == mp.PROXY_RADIUS_MM
+    from mitpiv.io import read_truth
+    from mitpiv.physics.seeding import seed_box
+
+    s = {k: v for k, v in cfg["seeding"].items() if k not in ("box_min_mm", "box_max_mm", "proxy_radius_mm")}
+    p = seed_box(mp.BOX_MIN, mp.BOX_MAX, seed=cfg["seed"], **s)
+    truth = read_truth(SCENE.parent / "truth.npz")
+    np.testing.assert_array_equal(p.positions_mm, truth["positions_mm"][0])
+    flow = {k: v for k, v in cfg["flow"].items() if k != "dt_s"}
+    assert all(np.allclose(truth["flow"][k], v) for k, v in flow.items() if k != "kind")
