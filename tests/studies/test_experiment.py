@@ -173,7 +173,7 @@ def test_bad_study_files(tmp_path):
             run_sweep(write(tmp_path, text, "s.toml"), tmp_path / "sw")
 
 
-def test_default_experiment_matches_the_scene_particles():
+def test_default_experiment_matches_the_scene_particles(tmp_path):
     """The README's main command runs scenes/tomo4/experiment.toml: its particles and flow
     are those of scenes/tomo4/make_particles.py (same seed, count, box, ring)."""
     import importlib.util
@@ -191,7 +191,8 @@ def test_default_experiment_matches_the_scene_particles():
 
     s = {k: v for k, v in cfg["seeding"].items() if k not in ("box_min_mm", "box_max_mm", "proxy_radius_mm")}
     p = seed_box(mp.BOX_MIN, mp.BOX_MAX, seed=cfg["seed"], **s)
-    truth = read_truth(SCENE.parent / "truth.npz")
+    mp.main(["--out", str(tmp_path)])  # the scene's own particle script, into a scratch folder
+    truth = read_truth(tmp_path / "truth.npz")
     np.testing.assert_array_equal(p.positions_mm, truth["positions_mm"][0])
     flow = {k: v for k, v in cfg["flow"].items() if k != "dt_s"}
     assert all(np.allclose(truth["flow"][k], v) for k, v in flow.items() if k != "kind")
