@@ -138,8 +138,8 @@ def cmd_reconstruct(args) -> int:
     import numpy as np
 
     from mitpiv import reconstruct as rc
-    from mitpiv.io import read_exr
-    from mitpiv.io.atomic import atomic_path
+    from mitpiv.io import read_exr, write_volume
+    from mitpiv.reconstruct.tomo import TOMO_METHODS
     from mitpiv.render.render import write_preview
 
     if len(args.voxel) not in (1, 3):
@@ -155,17 +155,12 @@ def cmd_reconstruct(args) -> int:
           f"method {args.method}", file=sys.stderr)
     t0 = time.perf_counter()
     info = {}
-    if args.method in ("mlos", "mart", "smart", "sapiv"):
-        mappings = [rc.mapping_from_metadata(m) for m in metas]
-        if args.method == "mlos":
-            vol = rc.mlos(images, mappings, grid, interpolation=args.interpolation, progress=True)
-        elif args.method == "sapiv":
-            vol = rc.sapiv_refocus(images, mappings, grid, method=args.combine, interpolation=args.interpolation,
-                                   threshold_k=None if args.threshold_k < 0 else args.threshold_k, progress=True)
-        else:
-            vol, info = rc.mart(images, mappings, grid, iterations=args.iterations, mu=args.mu, smart=args.method == "smart",
-                                weights=args.weights, interpolation=args.interpolation, preprocess=args.preprocess,
-                                progress=True, return_info=True)
+    if args.method in TOMO_METHODS:
+        vol, info = rc.reconstruct_volume(images, [rc.mapping_from_metadata(m) for m in metas], grid, args.method,
+                                          iterations=args.iterations, mu=args.mu, weights=args.weights,
+                                          interpolation=args.interpolation, preprocess=args.preprocess,
+                                          combine=args.combine,
+                                          threshold_k=None if args.threshold_k < 0 else args.threshold_k, progress=True)
     else:
         from mitpiv.lightfield import decode
         from mitpiv.lightfield.decode import optics_from_metadata
@@ -197,9 +192,7 @@ def cmd_reconstruct(args) -> int:
     record = {"method": args.method, "images": [str(f) for f in args.images], "grid": grid.to_dict(),
               "seconds": elapsed, "metrics": metrics,
               "info": {k: v for k, v in info.items() if isinstance(v, int | float | str | list)}}
-    with atomic_path(out, suffix=".npz") as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, volume=vol, meta=json.dumps(record))
+    write_volume(out, vol, record)
     write_preview(out.with_suffix(".png"), np.asarray(vol).max(axis=0))
     print(f"volume {vol.shape} ({args.method}, {elapsed:.1f} s) -> {out} (+ max projection {out.with_suffix('.png')})")
     for k, v in metrics.items():
@@ -209,23 +202,9 @@ def cmd_reconstruct(args) -> int:
 
 def _read_volume(path):
     """(volume, VoxelGrid, meta) from a .npz written by ``mitpiv reconstruct``."""
-    from pathlib import Path
+    from mitpiv.io import read_volume
 
-    import numpy as np
-
-    from mitpiv.reconstruct import VoxelGrid
-
-    path = Path(path)
-    if not path.is_file():
-        raise MitpivError(f"volume file {str(path)!r} does not exist.")
-    try:
-        with np.load(path) as z:
-            vol = z["volume"]
-            meta = json.loads(str(z["meta"]))
-        grid = VoxelGrid.from_dict(meta["grid"])
-    except (KeyError, ValueError, OSError) as e:
-        raise MitpivError(f"{str(path)!r} is not a volume written by 'mitpiv reconstruct' ({e}).") from None
-    return grid.check_volume(vol, str(path)), grid, meta
+    return read_volume(path)
 
 
 def _truth_frame(path, frame: int):
@@ -244,15 +223,14 @@ def cmd_evaluate(args) -> int:
     from mitpiv import analysis
     from mitpiv.io.atomic import atomic_path
 
+    out_path = Path(args.out) if args.out else None
+    if out_path is not None and out_path.suffix != ".json":
+        raise MitpivError(f"evaluate: --out must be a .json file, got {str(out_path)!r}.")
     vol, grid, _ = _read_volume(args.volume)
     truth = _truth_frame(args.truth, args.frame)
-    pos = truth["positions_mm"][args.frame]
-    found = analysis.find_particles(vol, grid, method=args.method, threshold_rel=args.threshold_rel)
-    res = analysis.match(found, pos, grid=grid, radius_voxels=args.radius_voxels)
-    tv = analysis.truth_volume(pos, grid)
-    out = {"volume": str(args.volume), "truth": str(args.truth), "frame": args.frame, "method": args.method,
-           "Q": analysis.quality_q(vol, tv), "Q*": analysis.quality_q_zero_mean(vol, tv),
-           "Q'": analysis.rank_correlation(vol, tv), "SNR": analysis.plane_snr(vol), "particles": res.summary()}
+    metrics, res = analysis.evaluate_volume(vol, grid, truth["positions_mm"][args.frame], method=args.method,
+                                            threshold_rel=args.threshold_rel, radius_voxels=args.radius_voxels)
+    out = {"volume": str(args.volume), "truth": str(args.truth), "frame": args.frame, "method": args.method, **metrics}
     s = out["particles"]
     q_rank = out["Q'"]
     print(f"Q {out['Q']:.4f}  Q* {out['Q*']:.4f}  Q' {q_rank:.4f}  SNR {out['SNR']:.2f}")
@@ -261,10 +239,7 @@ def cmd_evaluate(args) -> int:
     for name in ("bias", "rms", "u95"):
         v = s[f"{name}_vox"]
         print(f"  {name:4s} [voxels] x {v[0]:+.3f}  y {v[1]:+.3f}  z {v[2]:+.3f}")
-    if args.out:
-        out_path = Path(args.out)
-        if out_path.suffix != ".json":
-            raise MitpivError(f"evaluate: --out must be a .json file, got {str(out_path)!r}.")
+    if out_path is not None:
         with atomic_path(out_path, suffix=".json") as tmp:
             tmp.write_text(json.dumps(out, indent=2))
         res.plot(out_path.with_suffix(".png"))
@@ -306,7 +281,7 @@ def cmd_piv(args) -> int:
     metrics = {}
     if flow is not None:
         res = analysis.velocity_error(field, flow, t0_s=t0)
-        metrics = {k: res[k] for k in ("rms", "bias", "rms_vox", "bias_vox", "rms_magnitude", "n", "outlier_ratio", "units")}
+        metrics = analysis.velocity_error_summary(res)
         field.info["velocity_error"] = metrics
         analysis.plot_velocity_error(field, res, out.with_suffix(".error.png"))
     field.save(out)

@@ -33,7 +33,14 @@ __all__ = [
     "mapping_from_metadata",
 ]
 from mitpiv.reconstruct.plenoptic import drt_mart, drt_weights, fuse, plenoptic_volume  # noqa: E402
-from mitpiv.reconstruct.tomo import mart, mlos, preprocess_images, sapiv_refocus, voxel_weights  # noqa: E402
+from mitpiv.reconstruct.tomo import (  # noqa: E402
+    mart,
+    mlos,
+    preprocess_images,
+    reconstruct_volume,
+    sapiv_refocus,
+    voxel_weights,
+)
 
-__all__ += ["VoxelGrid", "mlos", "mart", "sapiv_refocus", "preprocess_images", "voxel_weights", "plenoptic_volume",
+__all__ += ["VoxelGrid", "mlos", "mart", "reconstruct_volume", "sapiv_refocus", "preprocess_images", "voxel_weights", "plenoptic_volume",
             "fuse", "drt_weights", "drt_mart"]

@@ -577,3 +577,24 @@ def _residual(cams, flat, proj, vol, k) -> float:
         k["project"](cw.indptr, cw.indices, cw.data, vol, p)
         r += float(np.sum((f - p) ** 2))
     return math.sqrt(r)
+
+
+TOMO_METHODS = ("mlos", "mart", "smart", "sapiv")
+
+
+def reconstruct_volume(images, mappings, grid: VoxelGrid, method: str = "mart", *, iterations: int = 5, mu: float = 1.0,
+                       weights: str = "circle", interpolation: str = "linear", preprocess: float | None = None,
+                       combine: str = "multiplicative", threshold_k: float | None = 3.0,
+                       progress: bool = False) -> tuple[np.ndarray, dict]:
+    """One entry point for the camera-image methods (``mlos``, ``mart``, ``smart``,
+    ``sapiv``, the latter combining by ``combine`` with per-plane ``threshold_k``); returns
+    (volume, info), info from :func:`mart` or empty."""
+    if method == "mlos":
+        return mlos(images, mappings, grid, interpolation=interpolation, progress=progress), {}
+    if method == "sapiv":
+        return sapiv_refocus(images, mappings, grid, method=combine, interpolation=interpolation,
+                             threshold_k=threshold_k, progress=progress), {}
+    if method in ("mart", "smart"):
+        return mart(images, mappings, grid, iterations=iterations, mu=mu, smart=method == "smart", weights=weights,
+                    interpolation=interpolation, preprocess=preprocess, progress=progress, return_info=True)
+    raise ConfigError(f"reconstruct: method={method!r} is not one of {TOMO_METHODS}.")

@@ -209,6 +209,7 @@ def _grid(cfg):
 
 def _stage_reconstruct(cfg, run: Path, out: Path, source: str):
     from mitpiv import reconstruct as rc
+    from mitpiv.io import write_volume
 
     r = dict(cfg["reconstruction"])
     method = r.get("method", "mart")
@@ -216,27 +217,20 @@ def _stage_reconstruct(cfg, run: Path, out: Path, source: str):
     info = {}
     for frame in (0, 1):
         imgs, metas, _ = _images(run, frame, source)
-        maps = [rc.mapping_from_metadata(m) for m in metas]
-        if method == "mlos":
-            vol = rc.mlos(imgs, maps, grid, interpolation=r.get("interpolation", "linear"))
-        elif method == "sapiv":
-            vol = rc.sapiv_refocus(imgs, maps, grid, method=r.get("combine", "multiplicative"),
-                                   interpolation=r.get("interpolation", "linear"))
-        elif method in ("mart", "smart"):
-            vol, inf = rc.mart(imgs, maps, grid, iterations=int(r.get("iterations", 5)), mu=float(r.get("mu", 1.0)),
-                               smart=method == "smart", weights=r.get("weights", "circle"),
-                               interpolation=r.get("interpolation", "linear"), progress=True, return_info=True)
+        vol, inf = rc.reconstruct_volume(imgs, [rc.mapping_from_metadata(m) for m in metas], grid, method,
+                                         iterations=int(r.get("iterations", 5)), mu=float(r.get("mu", 1.0)),
+                                         weights=r.get("weights", "circle"), interpolation=r.get("interpolation", "linear"),
+                                         combine=r.get("combine", "multiplicative"), progress=True)
+        if inf:
             info[f"frame{frame}"] = {k: v for k, v in inf.items() if isinstance(v, int | float | str)}
-        else:
-            raise ConfigError(f"experiment: [reconstruction] method = {method!r} is not one of mlos, mart, smart, sapiv.")
-        with open(out / f"volume_{frame}.npz", "wb") as fh:
-            np.savez_compressed(fh, volume=vol, meta=json.dumps({"method": method, "grid": grid.to_dict()}))
+        write_volume(out / f"volume_{frame}.npz", vol, {"method": method, "grid": grid.to_dict()})
     return info
 
 
 def _volume(run: Path, frame: int):
-    with np.load(run / "reconstruct" / f"volume_{frame}.npz") as z:
-        return z["volume"]
+    from mitpiv.io import read_volume
+
+    return read_volume(run / "reconstruct" / f"volume_{frame}.npz")[0]
 
 
 def _stage_evaluate(cfg, run: Path, out: Path):
@@ -248,15 +242,9 @@ def _stage_evaluate(cfg, run: Path, out: Path):
     truth = read_truth(run / "particles" / "truth.npz")
     metrics = {}
     for frame in (0, 1):
-        vol = _volume(run, frame)
-        pos = truth["positions_mm"][frame]
-        tv = analysis.truth_volume(pos, grid)
-        found = analysis.find_particles(vol, grid, method=p.get("method", "gauss3"),
-                                        threshold_rel=float(p.get("threshold_rel", 0.1)))
-        res = analysis.match(found, pos, grid=grid, radius_voxels=float(p.get("radius_voxels", 2.0)))
-        metrics[f"frame{frame}"] = {"Q": analysis.quality_q(vol, tv), "Q*": analysis.quality_q_zero_mean(vol, tv),
-                                    "Q'": analysis.rank_correlation(vol, tv), "SNR": analysis.plane_snr(vol),
-                                    "particles": res.summary()}
+        metrics[f"frame{frame}"], res = analysis.evaluate_volume(
+            _volume(run, frame), grid, truth["positions_mm"][frame], method=p.get("method", "gauss3"),
+            threshold_rel=float(p.get("threshold_rel", 0.1)), radius_voxels=float(p.get("radius_voxels", 2.0)))
         res.plot(out / f"particle_errors_{frame}.png", title=f"frame {frame} particle position error")
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
     return metrics
@@ -275,8 +263,7 @@ def _stage_piv(cfg, run: Path, out: Path):
                            overlap=pv.get("overlap", 0.75), deform=bool(pv.get("deform", True)),
                            interpolation=pv.get("interpolation", "cubic"), dt_s=dt, progress=True)
     res = analysis.velocity_error(field, flow_from_dict(truth["flow"]))
-    keys = ("rms", "bias", "rms_vox", "bias_vox", "rms_magnitude", "n", "outlier_ratio", "units")
-    metrics = {k: res[k] for k in keys}
+    metrics = analysis.velocity_error_summary(res)
     field.info["velocity_error"] = metrics
     field.save(out / "field.npz")
     analysis.plot_velocity_error(field, res, out / "velocity_error.png")
