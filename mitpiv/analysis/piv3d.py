@@ -251,20 +251,24 @@ def _warp_kernel():
     return warp
 
 
-def _deform(vol, disp_xyz, sign, interpolation):
-    """vol sampled at x + sign * disp / 2 (disp per voxel, (nz, ny, nx, 3) in x, y, z)."""
+def _deform_pair(a, b, disp_xyz, interpolation):
+    """Both volumes resampled half a predictor apart: a(x - d/2), b(x + d/2) (disp per voxel,
+    (nz, ny, nx, 3) in x, y, z); trilinear (Numba) or cubic B-spline (SciPy, the base grid
+    of sample coordinates built once for both)."""
     if interpolation == "linear":
-        out = np.empty(vol.shape, np.float32)
-        _warp_kernel()(vol, disp_xyz.astype(np.float32), float(sign), out)
+        d = disp_xyz.astype(np.float32)
+        out = (np.empty(a.shape, np.float32), np.empty(b.shape, np.float32))
+        _warp_kernel()(a, d, -1.0, out[0])
+        _warp_kernel()(b, d, +1.0, out[1])
         return out
     from scipy import ndimage
 
-    nz, ny, nx = vol.shape
-    kk, jj, ii = np.meshgrid(np.arange(nz, dtype=np.float32), np.arange(ny, dtype=np.float32),
-                             np.arange(nx, dtype=np.float32), indexing="ij")
-    h = np.float32(0.5 * sign)
-    coords = np.stack([kk + h * disp_xyz[..., 2], jj + h * disp_xyz[..., 1], ii + h * disp_xyz[..., 0]])
-    return ndimage.map_coordinates(vol, coords, order=3, mode="grid-constant", cval=0.0, prefilter=True).astype(np.float32)
+    nz, ny, nx = a.shape
+    base = np.stack(np.meshgrid(np.arange(nz, dtype=np.float32), np.arange(ny, dtype=np.float32),
+                                np.arange(nx, dtype=np.float32), indexing="ij"))
+    half = np.float32(0.5) * np.moveaxis(disp_xyz[..., ::-1].astype(np.float32), -1, 0)  # (z, y, x) first
+    return tuple(ndimage.map_coordinates(v, base + sign * half, order=3, mode="grid-constant", cval=0.0,
+                                         prefilter=True).astype(np.float32) for v, sign in ((a, -1), (b, 1)))
 
 
 def _gather(padded, pad, starts_zyx, w_zyx):
@@ -293,12 +297,11 @@ def _correlate(a, b, normalised, width):
     del fa, fb
     if normalised:
         corr /= np.sqrt(np.where(valid, ea * eb, 1.0))[:, None, None, None]
-    corr = corr.astype(np.float64)
     flat = corr.reshape(n, -1)
     arg = np.argmax(flat, axis=1)
     pk, pj, pi = np.unravel_index(arg, (wz, wy, wx))
     r = np.arange(n)
-    c = flat[r, arg]
+    c = flat[r, arg].astype(np.float64)
     offs = []
     for ax, (p, m) in enumerate(((pi, wx), (pj, wy), (pk, wz))):
         lo, hi = (p - 1) % m, (p + 1) % m
@@ -317,7 +320,7 @@ def _correlate(a, b, normalised, width):
     bj = (pj[:, None, None, None] + o[None, None, :, None]) % wy
     bi = (pi[:, None, None, None] + o[None, None, None, :]) % wx
     corr[r[:, None, None, None], bk, bj, bi] = -np.inf
-    second = corr.reshape(n, -1).max(axis=1)
+    second = corr.reshape(n, -1).max(axis=1).astype(np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
         snr = np.where(second > 0, c / np.where(second > 0, second, 1.0), np.inf)
     snr = np.where(valid, np.minimum(snr, 1e6), 0.0)
@@ -411,8 +414,7 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
         if deform and prev is not None:
             kk, jj, ii = (np.arange(n, dtype=np.float64) for n in (nz, ny, nx))
             dense = _resample(prev[1], prev[0], (kk, jj, ii)).astype(np.float32)
-            va = _deform(a, dense, -1.0, interpolation)
-            vb = _deform(b, dense, +1.0, interpolation)
+            va, vb = _deform_pair(a, b, dense, interpolation)
             del dense
             shift_a = shift_b = np.zeros_like(starts)
             base = pred_flat
