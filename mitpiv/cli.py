@@ -200,13 +200,6 @@ def cmd_reconstruct(args) -> int:
     return 0
 
 
-def _read_volume(path):
-    """(volume, VoxelGrid, meta) from a .npz written by ``mitpiv reconstruct``."""
-    from mitpiv.io import read_volume
-
-    return read_volume(path)
-
-
 def _truth_frame(path, frame: int):
     from mitpiv.io import read_truth
 
@@ -226,7 +219,9 @@ def cmd_evaluate(args) -> int:
     out_path = Path(args.out) if args.out else None
     if out_path is not None and out_path.suffix != ".json":
         raise MitpivError(f"evaluate: --out must be a .json file, got {str(out_path)!r}.")
-    vol, grid, _ = _read_volume(args.volume)
+    from mitpiv.io import read_volume
+
+    vol, grid, _ = read_volume(args.volume)
     truth = _truth_frame(args.truth, args.frame)
     metrics, res = analysis.evaluate_volume(vol, grid, truth["positions_mm"][args.frame], method=args.method,
                                             threshold_rel=args.threshold_rel, radius_voxels=args.radius_voxels)
@@ -255,8 +250,10 @@ def cmd_piv(args) -> int:
     out = Path(args.out)
     if out.suffix != ".npz":
         raise MitpivError(f"piv: --out must be a .npz file, got {str(out)!r}.")
-    va, grid, _ = _read_volume(args.vol_a)
-    vb, grid_b, _ = _read_volume(args.vol_b)
+    from mitpiv.io import read_volume
+
+    va, grid, _ = read_volume(args.vol_a)
+    vb, grid_b, _ = read_volume(args.vol_b)
     if grid_b != grid:
         raise MitpivError(f"piv: the volumes lie on different grids ({grid.to_dict()} vs {grid_b.to_dict()}); "
                           f"reconstruct both frames on the same --bounds and --voxel.")

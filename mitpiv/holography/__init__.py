@@ -62,10 +62,16 @@ def transfer_function(shape, dx_mm: float, dz_mm: float, wavelength_mm: float, *
     prop = arg > 0
     H = np.where(prop, np.exp(2j * np.pi * dz_mm * np.sqrt(np.where(prop, arg, 0.0))), 0.0)
     if band_limit and dz_mm != 0.0:
-        lim_x = 1.0 / (wavelength_mm * math.sqrt((2.0 * dz_mm / (nx * dx_mm)) ** 2 + 1.0))
-        lim_y = 1.0 / (wavelength_mm * math.sqrt((2.0 * dz_mm / (ny * dx_mm)) ** 2 + 1.0))
-        H = H * ((np.abs(fx) < lim_x) & (np.abs(fy) < lim_y))
+        H = H * _band(fx, fy, shape, dx_mm, dz_mm, wavelength_mm)
     return H
+
+
+def _band(fx, fy, shape, dx_mm, dz_mm, wavelength_mm):
+    """Matsushima-Shimobaba band limit per axis, f_lim = 1 / (lambda sqrt((2 z / S)^2 + 1))."""
+    ny, nx = shape
+    lim_x = 1.0 / (wavelength_mm * math.sqrt((2.0 * dz_mm / (nx * dx_mm)) ** 2 + 1.0))
+    lim_y = 1.0 / (wavelength_mm * math.sqrt((2.0 * dz_mm / (ny * dx_mm)) ** 2 + 1.0))
+    return (np.abs(fx) < lim_x) & (np.abs(fy) < lim_y)
 
 
 def propagate(field, dz_mm: float, *, pixel_um: float, wavelength_nm: float, pad: bool = True,
@@ -305,9 +311,7 @@ def iter_planes(hologram, z_mm, *, pixel_um=None, wavelength_nm=None, background
         # band-limited parts cut
         ph = np.where(prop, np.exp(-1j * (dkz * np.float32(zk))), 0).astype(np.complex64)
         if band_limit:
-            lim_x = 1.0 / (wl * math.sqrt((2.0 * zk / (shape[1] * dx)) ** 2 + 1.0))
-            lim_y = 1.0 / (wl * math.sqrt((2.0 * zk / (shape[0] * dx)) ** 2 + 1.0))
-            ph *= (np.abs(fx) < lim_x) & (np.abs(fy) < lim_y)
+            ph *= _band(fx, fy, shape, dx, zk, wl)
         yield k, fft.ifft2(spec * ph, workers=-1)[:ny, :nx]
 
 

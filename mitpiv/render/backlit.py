@@ -58,8 +58,9 @@ def stack_depth(camera, points_world) -> np.ndarray:
 def stack_pixels(lf, u_index, v_index):
     """Refocused-image indices (column, row; pixel centres at integers) -> sensor pixels of
     the lenslet lattice, the coordinates a :class:`Dewarp` is fitted in."""
-    ds = lf.s_px[1] - lf.s_px[0] if len(lf.s_px) > 1 else 1.0
-    dt = lf.t_px[1] - lf.t_px[0] if len(lf.t_px) > 1 else 1.0
+    from mitpiv.lightfield.refocus import _grid_steps
+
+    ds, dt = _grid_steps(lf)
     return lf.s_px[0] + np.asarray(u_index) * ds, lf.t_px[0] + np.asarray(v_index) * dt
 
 
