@@ -89,3 +89,16 @@ def test_truth_npz_and_csv(tmp_path):
     np.testing.assert_allclose(rows[:, -3:], 0.1)
     with pytest.raises(ConfigError, match="npz or .csv"):
         write_truth(tmp_path / "t.txt", positions_mm=[p0], times_s=[0], diameters_um=1.0)
+
+
+def test_atomic_files_get_plain_permissions(tmp_path):
+    import os
+    import stat
+
+    from mitpiv.io.atomic import atomic_path
+
+    with atomic_path(tmp_path / "a.txt") as tmp:
+        tmp.write_text("x")
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE((tmp_path / "a.txt").stat().st_mode) == 0o666 & ~umask
