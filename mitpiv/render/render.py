@@ -104,7 +104,8 @@ def _truth_info(xml_path: Path, params: dict) -> tuple[str | None, np.ndarray | 
     return None, None
 
 
-def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0, progress=True) -> list[Path]:
+def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0, progress=True,
+                 sensors=None) -> list[Path]:
     """Render every sensor of a scene XML for each frame.
 
     Writes ``{sensor_id}_frame{frame:03d}.exr`` (float32, metadata in the header) and a
@@ -124,6 +125,9 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
         Samples per pixel for camera-tracing integrators (default: the scene's sampler).
     seed : int
         Seed of the sampler / particle tracer.
+    sensors : sequence of str, optional
+        Ids of the sensors to render (default every sensor of the scene); an id the scene
+        does not have is an error that lists the ids it has.
 
     Returns
     -------
@@ -145,7 +149,15 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
     sha = hashlib.sha256(xml_path.read_bytes()).hexdigest()
     truth, times = _truth_info(xml_path, params)
     written = []
-    total = sum(len(s.sensors()) for s in scenes.values())
+    ids = [s.id() or f"sensor{i}" for i, s in enumerate(next(iter(scenes.values())).sensors())]
+    if sensors is not None:
+        sensors = [str(s) for s in ([sensors] if isinstance(sensors, str) else sensors)]
+        missing = [s for s in sensors if s not in ids]
+        if missing or not sensors:
+            raise ConfigError(f"render_scene: sensors={sensors!r}: {missing or 'none named'} not in the scene; "
+                              f"its sensors are {ids}.")
+    chosen = set(ids if sensors is None else sensors)
+    total = len(chosen) * len(scenes)
     done = 0
     for f, sc in scenes.items():
         laser = [e.describe() for e in sc.emitters() if hasattr(e, "irradiance_numpy")]
@@ -153,6 +165,8 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
                      if sh.emitter() is not None and hasattr(sh.emitter(), "particle_arrays")]
         for i, sensor in enumerate(sc.sensors()):
             sid = sensor.id() or f"sensor{i}"
+            if sid not in chosen:
+                continue
             t0 = time.perf_counter()
             arr = render_sensor(sc, sensor, spp=spp or 0, seed=seed)
             dt = time.perf_counter() - t0

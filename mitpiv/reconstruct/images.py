@@ -1,0 +1,65 @@
+"""One reconstruction entry point for rendered images with their metadata: the camera-image
+methods (:func:`~mitpiv.reconstruct.reconstruct_volume`) and the plenoptic ones (volumetric
+refocus of each decoded light field, fused over cameras; DRT-MART of one raw image), shared
+by the CLI and the experiment runner."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mitpiv.errors import ConfigError
+from mitpiv.reconstruct.grid import VoxelGrid
+from mitpiv.reconstruct.tomo import TOMO_METHODS, reconstruct_volume
+
+RECONSTRUCT_METHODS = TOMO_METHODS + ("plenoptic", "drt-mart")
+
+
+def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, whites=None, iterations: int = 5,
+                       mu: float = 1.0, weights: str = "circle", interpolation: str = "linear",
+                       preprocess: float | None = None, combine: str = "multiplicative", threshold_k: float | None = 3.0,
+                       rays_per_pixel: int = 16, fuse_normalise: str = "histogram",
+                       progress: bool = False) -> tuple[np.ndarray, dict]:
+    """Reconstruct a volume from the images of one frame and their EXR metadata.
+
+    method : one of :data:`RECONSTRUCT_METHODS`. "plenoptic": each raw image decoded (its
+        camera from the metadata, devignetted by ``whites`` when given), refocused onto
+        ``grid`` (``combine``: additive or multiplicative), the volumes of several cameras
+        fused (:func:`~mitpiv.reconstruct.fuse`, ``fuse_normalise``); "drt-mart": one raw
+        image, dense-ray-tracing MART. Other methods: :func:`reconstruct_volume`.
+
+    Returns (volume, info).
+    """
+    if method in TOMO_METHODS:
+        from mitpiv.reconstruct.mapping import mapping_from_metadata
+
+        maps = []
+        for k, m in enumerate(metas):
+            if (m.get("camera") or {}).get("type") == "plenoptic":
+                raise ConfigError(f"reconstruct: image {k} comes from a plenoptic camera; method {method!r} needs "
+                                  f"pinhole cameras. Use method 'plenoptic' or 'drt-mart'.")
+            maps.append(mapping_from_metadata(m))
+        return reconstruct_volume(images, maps, grid, method, iterations=iterations, mu=mu, weights=weights,
+                                  interpolation=interpolation, preprocess=preprocess, combine=combine,
+                                  threshold_k=threshold_k, progress=progress)
+    if method not in RECONSTRUCT_METHODS:
+        raise ConfigError(f"reconstruct: method={method!r} is not one of {RECONSTRUCT_METHODS}.")
+    from mitpiv.lightfield import decode
+    from mitpiv.lightfield.decode import optics_from_metadata
+    from mitpiv.reconstruct.plenoptic import drt_mart, fuse, plenoptic_volume
+
+    cams = [optics_from_metadata(m) for m in metas]
+    if any(c is None for c in cams):
+        bad = [k for k, c in enumerate(cams) if c is None]
+        raise ConfigError(f"reconstruct: method {method!r} needs raw images of plenoptic sensors; image(s) {bad} "
+                          f"carry no plenoptic camera metadata. Use a tomographic method for pinhole cameras.")
+    if method == "drt-mart":
+        if len(images) != 1:
+            raise ConfigError(f"reconstruct: drt-mart takes one raw image, got {len(images)}.")
+        return drt_mart(images[0], cams[0], grid, iterations=iterations, mu=mu, rays_per_pixel=rays_per_pixel,
+                        progress=progress, return_info=True)
+    whites = list(whites) if whites is not None else [None] * len(images)
+    if len(whites) != len(images):
+        raise ConfigError(f"reconstruct: give one white image per raw image ({len(images)}), got {len(whites)}.")
+    vols = [plenoptic_volume(decode(img, optics=c, white=w), grid, method=combine, progress=progress)
+            for img, c, w in zip(images, cams, whites, strict=True)]
+    return (vols[0] if len(vols) == 1 else fuse(vols, normalise=fuse_normalise)), {"cameras": len(vols)}
