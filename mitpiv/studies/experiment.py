@@ -7,13 +7,18 @@ Experiment file (paths relative to it; every table but ``scene`` optional)::
     name = "tomo4-small"
     seed = 0
     [scene]            xml = "scene.xml"; params = { resolution = 256 }
-    [seeding]          box_min_mm, box_max_mm, count | concentration_per_mm3, diameter_um,
-                       distribution, geometric_std, min_separation_mm, proxy_radius_mm
+    [seeding]          box_min_mm, box_max_mm, one of count | concentration_per_mm3 | ppp
+                       (particles per pixel of ``density_sensor``, default the first
+                       rendered sensor) | particles_per_microlens (of a plenoptic
+                       ``density_sensor``), diameter_um, distribution, geometric_std,
+                       min_separation_mm, proxy_radius_mm
     [flow]             kind = "vortex_ring", ... (mitpiv.physics.flows), dt_s
-    [render]           spp
+    [render]           spp, sensors (ids of the scene's sensors to render; default all)
     [sensor]           SensorModel fields (bit_depth, peak_photons, shot_noise, ...)
-    [reconstruction]   method (mlos | mart | smart | sapiv), bounds_mm (6), voxel_mm,
-                       iterations, mu, weights, interpolation
+    [reconstruction]   method (mlos | mart | smart | sapiv | plenoptic | drt-mart),
+                       bounds_mm (6), voxel_mm, iterations, mu, weights, interpolation,
+                       combine, fuse_normalise, rays_per_pixel, camera_model ("true" |
+                       "undistorted": the cameras' lens distortion left uncorrected)
     [piv]              windows, overlap, deform, interpolation
     [particles]        method, threshold_rel, radius_voxels
 
@@ -153,6 +158,13 @@ def _stage_particles(cfg, out: Path):
     if box_min is None or box_max is None:
         raise ConfigError("experiment: [seeding] needs box_min_mm and box_max_mm.")
     proxy = float(s.pop("proxy_radius_mm", 0.02))
+    density_sensor = s.pop("density_sensor", None)
+    ppp, ppm = s.pop("ppp", None), s.pop("particles_per_microlens", None)
+    if ppp is not None or ppm is not None:
+        if "count" in s or "concentration_per_mm3" in s or (ppp is not None and ppm is not None):
+            raise ConfigError("experiment: [seeding] give one of count, concentration_per_mm3, ppp or "
+                              "particles_per_microlens.")
+        s["count"] = _count_for_density(cfg, out, box_min, box_max, ppp=ppp, ppm=ppm, sensor_id=density_sensor)
     particles = seed_box(box_min, box_max, seed=cfg["seed"], **s)
     f = dict(cfg["flow"])
     dt = float(f.pop("dt_s"))
@@ -167,12 +179,75 @@ def _stage_particles(cfg, out: Path):
     return {"n_particles": len(particles)}
 
 
+def visible_fraction(camera_meta: dict, box_min, box_max, *, samples: int = 200_000, seed: int = 0) -> float:
+    """Fraction of a uniformly seeded box that images onto the sensor of a rendered camera
+    (its EXR metadata ``camera``): pinhole projection, or for a plenoptic camera the chief
+    ray through the main-lens centre onto the microlens plane, scaled to the sensor."""
+    lo, hi = np.asarray(box_min, float), np.asarray(box_max, float)
+    pts = np.random.default_rng(seed).uniform(lo, hi, size=(samples, 3))
+    if camera_meta.get("type") == "plenoptic":
+        from mitpiv.physics.plenoptic import PlenopticCamera
+
+        cam = PlenopticCamera.from_dict(camera_meta)
+        loc = cam.world_to_local(pts)
+        front = loc[:, 2] > 0
+        z = np.where(front, loc[:, 2], 1.0)
+        uv = cam.sensor_mm_to_px(-cam.image_distance_mm * cam.image_scale * loc[:, :2] / z[:, None])
+        w, h = cam.resolution
+    else:
+        from mitpiv.reconstruct.mapping import mapping_from_metadata
+
+        m = mapping_from_metadata({"camera": camera_meta})
+        front = m.visible(pts)
+        uv = m.project(pts)
+        w, h = m.resolution
+    inside = front & (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+    return float(inside.mean())
+
+
+def _count_for_density(cfg, out: Path, box_min, box_max, *, ppp, ppm, sensor_id):
+    """Particle count for a target per-pixel (or per-microlens) density in one sensor."""
+    from mitpiv.io import write_particles_ply
+    from mitpiv.render.render import sensor_model
+    from mitpiv.render.scene import load_scene
+
+    value, what = (ppp, "ppp") if ppp is not None else (ppm, "particles_per_microlens")
+    if not isinstance(value, int | float) or not value > 0:
+        raise ConfigError(f"experiment: [seeding] {what} must be a number > 0, got {value!r}.")
+    # the scene reads particles_$frame.ply beside itself: a one-particle placeholder to load it
+    xml = out / "scene.xml"
+    shutil.copy(cfg["scene"]["xml"], xml)
+    centre = 0.5 * (np.asarray(box_min, float) + np.asarray(box_max, float))
+    for k in (0, 1):
+        write_particles_ply(out / f"particles_{k}.ply", centre[None], 1.0, proxy_radius_mm=0.01)
+    sc = load_scene(xml, frame=0, params=cfg["scene"].get("params"))
+    sensors = {(s.id() or f"sensor{i}"): s for i, s in enumerate(sc.sensors())}
+    wanted = sensor_id or (cfg["render"].get("sensors") or [next(iter(sensors))])[0]
+    if wanted not in sensors:
+        raise ConfigError(f"experiment: [seeding] density_sensor = {wanted!r} is not in the scene; its sensors are "
+                          f"{sorted(sensors)}.")
+    meta = sensor_model(sensors[wanted])
+    if ppm is not None and meta.get("type") != "plenoptic":
+        raise ConfigError(f"experiment: [seeding] particles_per_microlens needs a plenoptic density_sensor; "
+                          f"{wanted!r} is a {meta.get('type')!r}. Use ppp for pinhole cameras.")
+    frac = visible_fraction(meta, box_min, box_max, seed=cfg["seed"])
+    if frac == 0:
+        raise ConfigError(f"experiment: sensor {wanted!r} sees no part of the seeding box; cannot target a {what}.")
+    w, h = meta["resolution"]
+    if ppp is not None:
+        return int(round(ppp * w * h / frac))
+    from mitpiv.physics.plenoptic import PlenopticCamera
+
+    lenslets = int(np.prod(PlenopticCamera.from_dict(meta).mla_count))
+    return int(round(ppm * lenslets / frac))
+
+
 def _stage_render(cfg, run: Path, out: Path):
     from mitpiv.render.render import render_scene
 
     files = render_scene(run / "particles" / "scene.xml", out_dir=out, frames=(0, 1),
                          params=cfg["scene"].get("params"), spp=cfg["render"].get("spp"), seed=cfg["seed"],
-                         progress=True)
+                         progress=True, sensors=cfg["render"].get("sensors"))
     return {"images": [f.name for f in files]}
 
 
@@ -208,23 +283,39 @@ def _grid(cfg):
 
 
 def _stage_reconstruct(cfg, run: Path, out: Path, source: str):
-    from mitpiv import reconstruct as rc
     from mitpiv.io import write_volume
+    from mitpiv.reconstruct.images import reconstruct_images
 
     r = dict(cfg["reconstruction"])
     method = r.get("method", "mart")
+    model = r.get("camera_model", "true")
+    if model not in ("true", "undistorted"):
+        raise ConfigError(f"experiment: [reconstruction] camera_model = {model!r}; use \"true\" (the rendered "
+                          f"cameras) or \"undistorted\" (their lens distortion ignored, as when it is not calibrated).")
     grid = _grid(cfg)
     info = {}
     for frame in (0, 1):
         imgs, metas, _ = _images(run, frame, source)
-        vol, inf = rc.reconstruct_volume(imgs, [rc.mapping_from_metadata(m) for m in metas], grid, method,
-                                         iterations=int(r.get("iterations", 5)), mu=float(r.get("mu", 1.0)),
-                                         weights=r.get("weights", "circle"), interpolation=r.get("interpolation", "linear"),
-                                         combine=r.get("combine", "multiplicative"), progress=True)
+        if model == "undistorted":
+            metas = [_undistorted(m) for m in metas]
+        vol, inf = reconstruct_images(imgs, metas, grid, method, iterations=int(r.get("iterations", 5)),
+                                      mu=float(r.get("mu", 1.0)), weights=r.get("weights", "circle"),
+                                      interpolation=r.get("interpolation", "linear"),
+                                      combine=r.get("combine", "multiplicative"),
+                                      fuse_normalise=r.get("fuse_normalise", "histogram"),
+                                      rays_per_pixel=int(r.get("rays_per_pixel", 16)), progress=True)
         if inf:
             info[f"frame{frame}"] = {k: v for k, v in inf.items() if isinstance(v, int | float | str)}
         write_volume(out / f"volume_{frame}.npz", vol, {"method": method, "grid": grid.to_dict()})
     return info
+
+
+def _undistorted(meta: dict) -> dict:
+    """The metadata of a pinhole camera with its lens distortion set to zero."""
+    cam = dict(meta.get("camera") or {})
+    if isinstance(cam.get("distortion"), dict):
+        cam["distortion"] = {k: (0.0 if isinstance(v, int | float) else v) for k, v in cam["distortion"].items()}
+    return {**meta, "camera": cam}
 
 
 def _volume(run: Path, frame: int):
@@ -296,6 +387,35 @@ def _stage_report(cfg, run: Path, out: Path, metrics: dict, timings: dict, sourc
     fig.tight_layout()
     fig.savefig(out / "volume_projections.png", dpi=90)
     plt.close(fig)
+    # focal-stack slices: the frame-0 volume at five depths through the measurement volume
+    grid = _grid(cfg)
+    ks = np.linspace(0, vol.shape[0] - 1, 5).round().astype(int)
+    fig, axs = plt.subplots(1, len(ks), figsize=(3.0 * len(ks), 3.2))
+    top = float(np.percentile(vol, 99.9)) or None
+    for ax, k in zip(axs, ks, strict=True):
+        ax.imshow(vol[k], cmap="magma", origin="lower", vmax=top)
+        ax.set_title(f"z = {grid.z_mm[k]:+.2f} mm", fontsize=9)
+        ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(out / "volume_slices.png", dpi=90)
+    plt.close(fig)
+    figures = ["sensor_images.png", "volume_projections.png", "volume_slices.png"]
+    _, metas, files = _images(run, 0, source)
+    plen = [(f, m) for f, m in zip(files, metas, strict=True) if (m.get("camera") or {}).get("type") == "plenoptic"]
+    if plen:
+        from mitpiv.lightfield import decode
+
+        lf = decode(plen[0][0])
+        nv, nu, nt, ns = lf.data.shape
+        mosaic = lf.data.transpose(0, 2, 1, 3).reshape(nv * nt, nu * ns)
+        fig, ax = plt.subplots(figsize=(7, 7 * nv * nt / max(nu * ns, 1)))
+        ax.imshow(mosaic, cmap="gray", vmax=float(np.percentile(mosaic, 99.9)) or None)
+        ax.set_title(f"{plen[0][0].stem}: sub-aperture images ({nu} x {nv} views)", fontsize=9)
+        ax.axis("off")
+        fig.tight_layout()
+        fig.savefig(out / "subaperture_mosaic.png", dpi=90)
+        plt.close(fig)
+        figures.append("subaperture_mosaic.png")
     for name in ("particle_errors_0.png", "particle_errors_1.png"):
         shutil.copy(run / "evaluate" / name, out / name)
     shutil.copy(run / "piv" / "velocity_error.png", out / "velocity_error.png")
@@ -318,8 +438,8 @@ def _stage_report(cfg, run: Path, out: Path, metrics: dict, timings: dict, sourc
               f"| bias [voxels] | {b[0]:+.4f} | {b[1]:+.4f} | {b[2]:+.4f} |", "", "## Wall time per stage", "",
               "| stage | seconds |", "|---|---|"]
     lines += [f"| {k} | {v:.1f} |" for k, v in timings.items()]
-    lines += ["", "![sensor images](sensor_images.png)", "", "![volume](volume_projections.png)", "",
-              "![particle errors](particle_errors_0.png)", "", "![velocity error](velocity_error.png)", ""]
+    lines += [""] + [f"![{f[:-4].replace('_', ' ')}]({f})\n" for f in figures]
+    lines += ["![particle errors](particle_errors_0.png)", "", "![velocity error](velocity_error.png)", ""]
     (out / "report.md").write_text("\n".join(lines))
     return {}
 

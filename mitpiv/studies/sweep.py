@@ -13,6 +13,10 @@ Study file (paths relative to it)::
     x = "scene.params.distortion_percent"
     y = "frame0.Q"
     group = "reconstruction.iterations"
+    [full]                                       # optional: overrides of every point for
+    "scene.params.resolution" = 512              # the full-size study (--full)
+
+A point may carry a ``label`` (a name for the table and plots, not an experiment key).
 
 Each point is the base experiment with its overrides; the point's folder name is a hash
 of the overrides, so a rerun finds it. All points use the base seed (common random
@@ -37,11 +41,13 @@ from pathlib import Path
 from mitpiv.errors import ConfigError
 from mitpiv.studies.experiment import load_experiment, read_toml, run_config
 
-_STUDY_KEYS = {"name", "experiment", "grid", "points", "plot", "workers"}
+_STUDY_KEYS = {"name", "experiment", "grid", "points", "plot", "workers", "full"}
 
 
-def load_study(path) -> dict:
-    """Read a study file: returns name, the base experiment path and the list of points."""
+def load_study(path, *, full: bool = False) -> dict:
+    """Read a study file: returns name, the base experiment path and the list of points
+    (with ``full``, each point also carries the study's [full] overrides, the point's own
+    values winning)."""
     path = Path(path)
     st = read_toml(path, "study")
     unknown = set(st) - _STUDY_KEYS
@@ -64,8 +70,12 @@ def load_study(path) -> dict:
         points = [dict(p) for p in st["points"]]
         if not points:
             raise ConfigError(f"study {path.name}: [[points]] is empty.")
+    if full:
+        if not isinstance(st.get("full"), dict) or not st["full"]:
+            raise ConfigError(f"study {path.name}: --full needs a [full] table of overrides for the full-size study.")
+        points = [{**st["full"], **p} for p in points]
     return {"name": st.get("name", path.stem), "experiment": exp, "points": points, "plot": st.get("plot"),
-            "path": path}
+            "path": path, "workers": st.get("workers")}
 
 
 def point_id(overrides: dict) -> str:
@@ -88,7 +98,7 @@ def run_point(experiment_path: str, overrides: dict, out_dir: str) -> dict:
     row = {"point": point_id(overrides), **{f"param.{k}": v for k, v in overrides.items()}}
     t0 = time.perf_counter()
     try:
-        cfg = load_experiment(experiment_path, overrides)
+        cfg = load_experiment(experiment_path, {k: v for k, v in overrides.items() if k != "label"})
         m = run_config(cfg, out_dir)
         metrics = {}
         _flatten("", {"frame0": (m.get("evaluate") or {}).get("frame0"), "frame1": (m.get("evaluate") or {}).get("frame1"),
@@ -150,15 +160,17 @@ def plot_sweep(table, x: str, y: str, path, *, group: str | None = None) -> None
     plt.close(fig)
 
 
-def run_sweep(path, out_dir, scheduler=None, *, workers: int | None = None, progress: bool = True):
+def run_sweep(path, out_dir, scheduler=None, *, workers: int | None = None, full: bool = False,
+              progress: bool = True):
     """Run every point of the study in ``path`` on Dask; returns the results table (pandas).
 
     scheduler : None: a LocalCluster of ``workers`` single-threaded processes (default: the
         study's ``workers`` or 2); else the address of a running Dask scheduler.
+    full : apply the study's [full] overrides (the full-size study) to every point.
     """
     from dask.distributed import Client, LocalCluster, as_completed
 
-    st = load_study(path)
+    st = load_study(path, full=full)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rows = {}
