@@ -1,5 +1,5 @@
 """Command-line interface: ``mitpiv render``, ``info``, ``sensor``, ``decode``, ``refocus``,
-``reconstruct``, ``evaluate``, ``piv``, ``run`` and ``sweep``.
+``reconstruct``, ``evaluate``, ``piv``, ``run``, ``sweep`` and ``bench``.
 
 Thin: parses arguments, calls library functions, shows progress. Errors from mitpiv
 print as one line and exit with status 2.
@@ -121,7 +121,6 @@ def cmd_refocus(args) -> int:
     return 0
 
 
-RECONSTRUCT_METHODS = ("mlos", "mart", "smart", "sapiv", "plenoptic", "drt-mart")
 
 
 def _grid_from_args(args):
@@ -137,9 +136,8 @@ def cmd_reconstruct(args) -> int:
 
     import numpy as np
 
-    from mitpiv import reconstruct as rc
     from mitpiv.io import read_exr, write_volume
-    from mitpiv.reconstruct.tomo import TOMO_METHODS
+    from mitpiv.reconstruct.images import reconstruct_images
     from mitpiv.render.render import write_preview
 
     if len(args.voxel) not in (1, 3):
@@ -154,32 +152,11 @@ def cmd_reconstruct(args) -> int:
     print(f"grid {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]} voxels of {grid.voxel_mm} mm, {len(images)} image(s), "
           f"method {args.method}", file=sys.stderr)
     t0 = time.perf_counter()
-    info = {}
-    if args.method in TOMO_METHODS:
-        vol, info = rc.reconstruct_volume(images, [rc.mapping_from_metadata(m) for m in metas], grid, args.method,
-                                          iterations=args.iterations, mu=args.mu, weights=args.weights,
-                                          interpolation=args.interpolation, preprocess=args.preprocess,
-                                          combine=args.combine,
-                                          threshold_k=None if args.threshold_k < 0 else args.threshold_k, progress=True)
-    else:
-        from mitpiv.lightfield import decode
-        from mitpiv.lightfield.decode import optics_from_metadata
-
-        cams = [optics_from_metadata(m) for m in metas]
-        if any(c is None for c in cams):
-            raise MitpivError("reconstruct: plenoptic methods need raw EXRs rendered by a plenoptic sensor (camera metadata).")
-        if args.method == "drt-mart":
-            if len(images) != 1:
-                raise MitpivError(f"reconstruct: drt-mart takes one raw image, got {len(images)}.")
-            vol, info = rc.drt_mart(images[0], cams[0], grid, iterations=args.iterations, mu=args.mu,
-                                    rays_per_pixel=args.rays_per_pixel, progress=True, return_info=True)
-        else:
-            whites = args.white or [None] * len(images)
-            if len(whites) != len(images):
-                raise MitpivError(f"reconstruct: give one --white per image ({len(images)}), got {len(whites)}.")
-            vols = [rc.plenoptic_volume(decode(img, optics=c, white=w), grid, method=args.combine)
-                    for img, c, w in zip(images, cams, whites, strict=True)]
-            vol = vols[0] if len(vols) == 1 else rc.fuse(vols)
+    vol, info = reconstruct_images(images, metas, grid, args.method, whites=args.white, iterations=args.iterations,
+                                   mu=args.mu, weights=args.weights, interpolation=args.interpolation,
+                                   preprocess=args.preprocess, combine=args.combine,
+                                   threshold_k=None if args.threshold_k < 0 else args.threshold_k,
+                                   rays_per_pixel=args.rays_per_pixel, progress=True)
     elapsed = time.perf_counter() - t0
     metrics = {}
     if args.truth:
@@ -306,11 +283,20 @@ def cmd_run(args) -> int:
 def cmd_sweep(args) -> int:
     from mitpiv.studies import run_sweep
 
-    df = run_sweep(args.study, args.out, scheduler=args.scheduler, workers=args.workers)
+    df = run_sweep(args.study, args.out, scheduler=args.scheduler, workers=args.workers, full=args.full)
     ok = int((df["status"] == "ok").sum())
     print(f"{ok}/{len(df)} points ok -> {args.out}/results.csv, results.parquet")
     for _, row in df[df["status"] != "ok"].iterrows():
         print(f"  failed {row['point']}: {row['error']}")
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from mitpiv.studies.accuracy import accuracy_time
+
+    stages = [s.strip() for s in args.stages.split(",")] if args.stages else None
+    accuracy_time(args.out, size="quick" if args.quick else "full", stages=stages, seed=args.seed)
+    print(f"wrote {args.out}/accuracy_time.md, accuracy_time.csv and pareto_*.png")
     return 0
 
 
@@ -367,7 +353,7 @@ def main(argv=None) -> int:
     c = sub.add_parser("reconstruct", help="reconstruct a volume from camera EXRs (tomographic, SAPIV or plenoptic)")
     c.add_argument("images", nargs="+", help="EXR images with camera metadata (one per camera)")
     c.add_argument("--out", required=True, help="output .npz (volume (n_z, n_y, n_x) + JSON meta)")
-    c.add_argument("--method", choices=RECONSTRUCT_METHODS, default="mart")
+    c.add_argument("--method", choices=("mlos", "mart", "smart", "sapiv", "plenoptic", "drt-mart"), default="mart")
     c.add_argument("--bounds", type=float, nargs=6, required=True, metavar=("XMIN", "XMAX", "YMIN", "YMAX", "ZMIN", "ZMAX"),
                    help="volume [mm]")
     c.add_argument("--voxel", type=float, nargs="+", required=True, help="voxel size [mm]: one (cubic) or three (dx dy dz)")
@@ -418,7 +404,16 @@ def main(argv=None) -> int:
     w.add_argument("--out", required=True, help="sweep folder (results table, one run folder per point)")
     w.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (default: a local cluster)")
     w.add_argument("--workers", type=int, default=None, help="local cluster worker processes (default 2)")
+    w.add_argument("--full", action="store_true", help="the full-size study (the study's [full] overrides)")
     w.set_defaults(func=cmd_sweep)
+    b = sub.add_parser("bench", help="benchmarks: 'accuracy-time' measures every accuracy knob's time and error")
+    b.add_argument("which", choices=["accuracy-time"], help="the benchmark to run")
+    b.add_argument("--out", default="out/accuracy-time", help="output folder (tables, CSV, Pareto plots)")
+    b.add_argument("--quick", action="store_true", help="the small preset (seconds; default: the full preset, ~15 min)")
+    b.add_argument("--stages", default=None,
+                   help="comma-separated subset of render,lightfield,reconstruct,piv,end_to_end (default all)")
+    b.add_argument("--seed", type=int, default=0, help="seed of the particle field")
+    b.set_defaults(func=cmd_bench)
     args = p.parse_args(argv)
     try:
         return args.func(args)
