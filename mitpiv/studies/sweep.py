@@ -145,11 +145,22 @@ def plot_sweep(table, x: str, y: str, path, *, group: str | None = None) -> None
         raise ConfigError(f"plot_sweep: no column {name!r}; the table has {sorted(table.columns)}.")
 
     cx, cy = col(x), col(y)
-    fig, ax = plt.subplots(figsize=(6, 4))
-    groups = [(None, df)] if group is None else list(df.groupby(col(group)))
+    import pandas as pd
+
+    numeric = pd.api.types.is_numeric_dtype(df[cx])
+    cats = list(dict.fromkeys(df[cx]))  # a categorical x (e.g. labels) keeps the study's order
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    groups = [(None, df)] if group is None else list(df.groupby(col(group), sort=False))
     for g, sub in groups:
-        sub = sub.sort_values(cx)
-        ax.plot(sub[cx], sub[cy], "o-", label=None if g is None else f"{group} = {g}")
+        lab = None if g is None else f"{group} = {g}"
+        if numeric:
+            sub = sub.sort_values(cx)
+            ax.plot(sub[cx], sub[cy], "o-", label=lab)
+        else:
+            ax.plot([cats.index(v) for v in sub[cx]], sub[cy], "o", ms=7, label=lab)
+    if not numeric:
+        ax.set_xticks(range(len(cats)), [str(c) for c in cats], rotation=30, ha="right", fontsize=8)
+        ax.grid(True, axis="y", alpha=0.3)
     ax.set_xlabel(x)
     ax.set_ylabel(y)
     if group is not None:

@@ -127,3 +127,17 @@ def test_bad_study_inputs(tmp_path):
     s.write_text(f'experiment = "{SCENES / "sa5x5" / "experiment.toml"}"\n[[points]]\nlabel = "a"\n')
     with pytest.raises(ConfigError, match=r"\[full\]"):
         load_study(s, full=True)
+
+
+def test_plot_against_labels_keeps_the_study_order(tmp_path):
+    import pandas as pd
+
+    from mitpiv.studies.sweep import plot_sweep
+
+    df = pd.DataFrame({"param.label": ["b", "a", "b", "a"], "param.seeding.ppp": [0.05, 0.05, 0.1, 0.1],
+                       "frame0.Q": [0.6, 0.5, 0.4, 0.3], "status": ["ok"] * 4})
+    plot_sweep(df, "label", "frame0.Q", tmp_path / "l.png")
+    plot_sweep(df, "seeding.ppp", "frame0.Q", tmp_path / "g.png", group="label")
+    assert (tmp_path / "l.png").stat().st_size > 5000 and (tmp_path / "g.png").stat().st_size > 5000
+    with pytest.raises(ConfigError, match="no column"):
+        plot_sweep(df, "label", "frame0.Qx", tmp_path / "x.png")
