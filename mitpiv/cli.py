@@ -12,6 +12,7 @@ import json
 import sys
 
 from mitpiv.errors import MitpivError
+from mitpiv.reconstruct.images import RECONSTRUCT_METHODS
 
 
 def _parse_define(items: list[str]) -> dict:
@@ -353,7 +354,7 @@ def main(argv=None) -> int:
     c = sub.add_parser("reconstruct", help="reconstruct a volume from camera EXRs (tomographic, SAPIV or plenoptic)")
     c.add_argument("images", nargs="+", help="EXR images with camera metadata (one per camera)")
     c.add_argument("--out", required=True, help="output .npz (volume (n_z, n_y, n_x) + JSON meta)")
-    c.add_argument("--method", choices=("mlos", "mart", "smart", "sapiv", "plenoptic", "drt-mart"), default="mart")
+    c.add_argument("--method", choices=RECONSTRUCT_METHODS, default="mart")
     c.add_argument("--bounds", type=float, nargs=6, required=True, metavar=("XMIN", "XMAX", "YMIN", "YMAX", "ZMIN", "ZMAX"),
                    help="volume [mm]")
     c.add_argument("--voxel", type=float, nargs="+", required=True, help="voxel size [mm]: one (cubic) or three (dx dy dz)")
