@@ -90,9 +90,7 @@ def cmd_decode(args) -> int:
     out = Path(args.out)
     lf.save(out)
     # Sub-aperture mosaic preview: views tiled in (v, u) order.
-    nv, nu, nt, ns = lf.data.shape
-    mosaic = lf.data.transpose(0, 2, 1, 3).reshape(nv * nt, nu * ns)
-    write_preview(out.with_suffix(".png"), mosaic)
+    write_preview(out.with_suffix(".png"), lf.mosaic())
     s, t, u, v = lf.shape
     print(f"light field L[s, t, u, v] = {s}x{t}x{u}x{v} -> {out} (+ sub-aperture mosaic {out.with_suffix('.png')})")
     return 0

@@ -68,6 +68,11 @@ class LightField:
         """Sub-aperture (perspective) image of angular sample (iu, iv), rows = t."""
         return self.data[iv, iu]
 
+    def mosaic(self) -> np.ndarray:
+        """Sub-aperture images tiled in (v, u) order: (n_v n_t, n_u n_s)."""
+        nv, nu, nt, ns = self.data.shape
+        return self.data.transpose(0, 2, 1, 3).reshape(nv * nt, nu * ns)
+
     def save(self, path) -> Path:
         """Write the light field to a ``.npz`` file (atomic), with its optics and decode info."""
         import json

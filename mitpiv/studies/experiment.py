@@ -407,7 +407,7 @@ def _stage_report(cfg, run: Path, out: Path, metrics: dict, timings: dict, sourc
 
         lf = decode(plen[0][0])
         nv, nu, nt, ns = lf.data.shape
-        mosaic = lf.data.transpose(0, 2, 1, 3).reshape(nv * nt, nu * ns)
+        mosaic = lf.mosaic()
         fig, ax = plt.subplots(figsize=(7, 7 * nv * nt / max(nu * ns, 1)))
         ax.imshow(mosaic, cmap="gray", vmax=float(np.percentile(mosaic, 99.9)) or None)
         ax.set_title(f"{plen[0][0].stem}: sub-aperture images ({nu} x {nv} views)", fontsize=9)
