@@ -27,6 +27,7 @@ __all__ = [
     "HillVortex",
     "VortexRing",
     "ABC",
+    "RoundJet",
     "GridFlow",
     "flow_from_dict",
 ]
@@ -269,6 +270,57 @@ class ABC(Flow):
         return self.speed_mm_s * np.stack([u, v, w], axis=1)
 
 
+class RoundJet(_Axisymmetric):
+    """Laminar round jet (Schlichting's similarity solution, an exact solution of the
+    boundary-layer equations): with ``z`` measured along ``axis`` from the virtual origin
+    ``center``, ``xi = gamma r / z`` and ``gamma = sqrt(3 K / (16 pi)) / nu``,
+
+    ``u_z = 3 K / (8 pi nu z) / (1 + xi^2/4)^2``,
+    ``u_r = sqrt(3 K / (16 pi)) / z (xi - xi^3/4) / (1 + xi^2/4)^2``.
+
+    It derives from the Stokes stream function ``psi = nu z xi^2 / (1 + xi^2/4)`` and is
+    therefore exactly divergence-free; the kinematic momentum flux ``2 pi int u_z^2 r dr``
+    equals ``K`` at every ``z`` and the volume flux ``8 pi nu z`` grows by entrainment.
+    momentum_flux_mm4_s2: K = J / rho [mm^4/s^2]; viscosity_mm2_s: nu [mm^2/s] (water 1,
+    air 15). For a centreline speed ``U`` at distance ``z`` give ``K = 8 pi nu z U / 3``
+    (:meth:`from_centerline`). Points at or upstream of the virtual origin (``z <= 0``) are
+    outside the solution and raise :class:`ConfigError`.
+    """
+
+    kind = "round_jet"
+
+    def __init__(self, momentum_flux_mm4_s2=1.0e5, viscosity_mm2_s=1.0, center=(0, 0, 0), axis=(0, 0, 1)):
+        super().__init__(center, axis)
+        self.momentum_flux_mm4_s2 = check_positive(
+            "momentum_flux_mm4_s2", momentum_flux_mm4_s2, owner="RoundJet", unit="mm^4/s^2")
+        self.viscosity_mm2_s = check_positive("viscosity_mm2_s", viscosity_mm2_s, owner="RoundJet", unit="mm^2/s")
+
+    @classmethod
+    def from_centerline(cls, speed_mm_s, distance_mm, viscosity_mm2_s=1.0, center=(0, 0, 0), axis=(0, 0, 1)):
+        """The jet whose centreline speed is ``speed_mm_s`` at ``distance_mm`` from ``center``."""
+        check_positive("speed_mm_s", speed_mm_s, owner="RoundJet", unit="mm/s")
+        check_positive("distance_mm", distance_mm, owner="RoundJet", unit="mm")
+        k = 8 * math.pi * viscosity_mm2_s * distance_mm * speed_mm_s / 3
+        return cls(k, viscosity_mm2_s, center, axis)
+
+    def velocity(self, p, t):
+        r, z, e_r, _ = self._cyl(p)
+        if np.any(z <= 0):
+            bad = p[z <= 0][0]
+            raise ConfigError(
+                f"RoundJet: {int(np.sum(z <= 0))} point(s) lie at or upstream of the virtual origin "
+                f"center={self.center.tolist()} along axis={self.axis.tolist()}, e.g. {bad.tolist()}; "
+                f"move 'center' upstream of the measurement volume."
+            )
+        k, nu = self.momentum_flux_mm4_s2, self.viscosity_mm2_s
+        a = math.sqrt(3 * k / (16 * math.pi))
+        xi = (a / nu) * r / z
+        den = (1 + 0.25 * xi * xi) ** 2
+        uz = 3 * k / (8 * math.pi * nu * z) / den
+        ur = a / z * (xi - 0.25 * xi**3) / den
+        return ur[:, None] * e_r + uz[:, None] * self.axis
+
+
 class GridFlow(Flow):
     """A user velocity field on a regular grid, trilinearly interpolated (steady).
 
@@ -322,7 +374,7 @@ class GridFlow(Flow):
         return out
 
 
-_KINDS = {c.kind: c for c in (Uniform, SolidBody, LambOseen, Burgers, HillVortex, VortexRing, ABC, GridFlow)}
+_KINDS = {c.kind: c for c in (Uniform, SolidBody, LambOseen, Burgers, HillVortex, VortexRing, ABC, RoundJet, GridFlow)}
 
 
 def flow_from_dict(d: dict) -> Flow:

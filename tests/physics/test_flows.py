@@ -35,6 +35,7 @@ SOLENOIDAL = [
     F.Burgers(500.0, 0.5, 1.0),
     F.VortexRing(6.0, 800.0, 1.5, axis=(0, 1, 0), segments=512),
     F.ABC(1.0, 0.7, 0.4, length_mm=3.0, speed_mm_s=10.0),
+    F.RoundJet(2.0e5, 1.0, center=(1, 2, -30), axis=(0.1, 0, 1)),
 ]
 
 
@@ -59,6 +60,38 @@ def test_hill_vortex_divergence_free_away_from_boundary_and_continuous_across_it
     # far field of a translating sphere is a dipole: |u| ~ U (a/R)^3
     assert np.abs(hv(np.array([[0, 0, 500.0]]))).max() == pytest.approx(100 * (5 / 500) ** 3, rel=1e-6)
     np.testing.assert_allclose(hv(np.array([[0, 0, 0.0]])), [[0, 0, 250.0]], atol=1e-9)
+
+
+def test_round_jet_momentum_flux_entrainment_and_self_similarity():
+    k, nu = 3.0e5, 1.5
+    jet = F.RoundJet(k, nu, center=(0, 0, -10), axis=(0, 0, 1))
+    # geometric radii resolve the 0.06 mm wide jet at z = 5 mm as well as the far tail
+    # (u_z ~ r^-4: beyond 400 mm less than 1e-9 of K)
+    r = np.concatenate([[0.0], np.geomspace(1e-7, 400.0, 200_000)])
+    for z in (5.0, 20.0, 60.0):
+        p = np.stack([r, np.zeros_like(r), np.full_like(r, z - 10)], axis=1)
+        u = jet(p)
+        # momentum flux 2 pi int u_z^2 r dr = K at every z (trapezoid, float64: rel. error < 1e-6)
+        assert np.trapezoid(2 * np.pi * u[:, 2] ** 2 * r, r) == pytest.approx(k, rel=1e-6)
+        # volume flux 8 pi nu z grows linearly by entrainment (r^-3 tail: < 1e-4 beyond 400 mm)
+        q = np.trapezoid(2 * np.pi * u[:, 2] * r, r)
+        assert q == pytest.approx(8 * np.pi * nu * z, rel=5e-5)
+        # centreline 3K / (8 pi nu z); the radial velocity vanishes on the axis
+        assert u[0, 2] == pytest.approx(3 * k / (8 * np.pi * nu * z), rel=1e-12)
+        assert u[0, 0] == 0.0
+        # far from the axis the entrainment flow points inwards
+        assert u[-1, 0] < 0
+    # self-similar: u_z(r, z) z is a function of r / z only
+    a = jet(np.array([[2.0, 0, 10.0 - 10]]))[0, 2] * 10.0
+    b = jet(np.array([[6.0, 0, 30.0 - 10]]))[0, 2] * 30.0
+    assert a == pytest.approx(b, rel=1e-12)
+    # from_centerline inverts the centreline law
+    j2 = F.RoundJet.from_centerline(250.0, 40.0, viscosity_mm2_s=1.0)
+    assert j2(np.array([[0, 0, 40.0]]))[0, 2] == pytest.approx(250.0, rel=1e-12)
+    with pytest.raises(ConfigError, match="upstream of the virtual origin"):
+        jet(np.array([[0, 0, -12.0]]))
+    with pytest.raises(ConfigError, match="viscosity_mm2_s"):
+        F.RoundJet(1e5, 0.0)
 
 
 def test_lamb_oseen_circulation_and_core():
