@@ -273,6 +273,12 @@ def cmd_run(args) -> int:
     m = run_experiment(args.experiment, args.out)
     pv = m.get("piv") or {}
     ev = (m.get("evaluate") or {}).get("frame0", {})
+    if m.get("kind") == "backlit":
+        print(f"{m['name']}: {ev['n_matched']}/{ev['n_truth']} droplets detected, depth RMS "
+              f"{ev['depth_rms_diameters']:.2f} diameters, size RMS {ev['size_rms_mm'] * 1e3:.1f} um; "
+              f"{pv['n_correct']} correct tracks, velocity RMS {pv['rms_magnitude']:.1f} mm/s "
+              f"-> {args.out}/report/report.md")
+        return 0
     print(f"{m['name']}: Q {ev.get('Q', float('nan')):.3f}, particles detected "
           f"{100 * ev.get('particles', {}).get('detection_rate', float('nan')):.1f} %, PIV RMS error "
           f"{', '.join(f'{x:.4f}' for x in pv.get('rms_vox', []))} voxels -> {args.out}/report/report.md")

@@ -6,11 +6,13 @@ Experiment file (paths relative to it; every table but ``scene`` optional)::
 
     name = "tomo4-small"
     seed = 0
+    kind = "particles"  # the default; "backlit": plenoptic droplet tracking (mitpiv.studies.backlit)
     [scene]            xml = "scene.xml"; params = { resolution = 256 }
     [seeding]          box_min_mm, box_max_mm, one of count | concentration_per_mm3 | ppp
                        (particles per pixel of ``density_sensor``, default the first
                        rendered sensor) | particles_per_microlens (of a plenoptic
-                       ``density_sensor``), diameter_um, distribution, geometric_std,
+                       ``density_sensor``; give both and the sensor's kind picks),
+                       diameter_um, distribution, geometric_std,
                        min_separation_mm, proxy_radius_mm
     [flow]             kind = "vortex_ring", ... (mitpiv.physics.flows), dt_s
     [render]           spp, sensors (ids of the scene's sensors to render; default all)
@@ -68,6 +70,19 @@ def load_experiment(path, overrides: dict | None = None) -> dict:
     cfg = read_toml(path)
     for key, value in (overrides or {}).items():
         set_dotted(cfg, key, value)
+    kind = cfg.get("kind", "particles")
+    if kind == "backlit":
+        from mitpiv.studies.backlit import check_backlit
+
+        cfg.setdefault("name", path.stem)
+        cfg.setdefault("seed", 0)
+        if not isinstance(cfg["seed"], int) or cfg["seed"] < 0:
+            raise ConfigError(f"experiment {path.name}: seed must be an integer >= 0, got {cfg['seed']!r}.")
+        return check_backlit(cfg, path.name)
+    if kind != "particles":
+        raise ConfigError(f"experiment {path.name}: kind must be \"particles\" (the default: particle images, "
+                          f"reconstruction, PIV) or \"backlit\" (backlit plenoptic droplet tracking), got {kind!r}.")
+    cfg.pop("kind", None)
     unknown = set(cfg) - _TOP
     if unknown:
         raise ConfigError(f"experiment {path.name}: unknown key(s) {sorted(unknown)}; expected {sorted(_TOP)}.")
@@ -161,9 +176,10 @@ def _stage_particles(cfg, out: Path):
     density_sensor = s.pop("density_sensor", None)
     ppp, ppm = s.pop("ppp", None), s.pop("particles_per_microlens", None)
     if ppp is not None or ppm is not None:
-        if "count" in s or "concentration_per_mm3" in s or (ppp is not None and ppm is not None):
+        if "count" in s or "concentration_per_mm3" in s:
             raise ConfigError("experiment: [seeding] give one of count, concentration_per_mm3, ppp or "
-                              "particles_per_microlens.")
+                              "particles_per_microlens (ppp and particles_per_microlens may go together: the "
+                              "density_sensor's type picks one).")
         s["count"] = _count_for_density(cfg, out, box_min, box_max, ppp=ppp, ppm=ppm, sensor_id=density_sensor)
     particles = seed_box(box_min, box_max, seed=cfg["seed"], **s)
     f = dict(cfg["flow"])
@@ -211,9 +227,9 @@ def _count_for_density(cfg, out: Path, box_min, box_max, *, ppp, ppm, sensor_id)
     from mitpiv.render.render import sensor_model
     from mitpiv.render.scene import load_scene
 
-    value, what = (ppp, "ppp") if ppp is not None else (ppm, "particles_per_microlens")
-    if not isinstance(value, int | float) or not value > 0:
-        raise ConfigError(f"experiment: [seeding] {what} must be a number > 0, got {value!r}.")
+    for v, name in ((ppp, "ppp"), (ppm, "particles_per_microlens")):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int | float) or not v > 0):
+            raise ConfigError(f"experiment: [seeding] {name} must be a number > 0, got {v!r}.")
     # the scene reads particles_$frame.ply beside itself: a one-particle placeholder to load it
     xml = out / "scene.xml"
     shutil.copy(cfg["scene"]["xml"], xml)
@@ -227,6 +243,9 @@ def _count_for_density(cfg, out: Path, box_min, box_max, *, ppp, ppm, sensor_id)
         raise ConfigError(f"experiment: [seeding] density_sensor = {wanted!r} is not in the scene; its sensors are "
                           f"{sorted(sensors)}.")
     meta = sensor_model(sensors[wanted])
+    if ppp is not None and ppm is not None:  # both: the density sensor's kind picks
+        ppp, ppm = (None, ppm) if meta.get("type") == "plenoptic" else (ppp, None)
+    what = "ppp" if ppp is not None else "particles_per_microlens"
     if ppm is not None and meta.get("type") != "plenoptic":
         raise ConfigError(f"experiment: [seeding] particles_per_microlens needs a plenoptic density_sensor; "
                           f"{wanted!r} is a {meta.get('type')!r}. Use ppp for pinhole cameras.")
@@ -454,8 +473,42 @@ def run_experiment(path, out_dir) -> dict:
     return run_config(load_experiment(path), out_dir)
 
 
+def run_stages(name: str, run: Path, keys: dict, call) -> tuple[dict, dict]:
+    """Run the stages ``keys`` (name -> input hash, in order) into ``run``: a stage whose
+    folder records the same hash is skipped (its saved result and time are read back);
+    otherwise ``call(stage, tmp_dir, metrics, timings)`` fills a temporary folder, which is
+    renamed into place with the result (``stage_result.json``) and wall time
+    (``seconds.txt``). Returns (metrics, timings) per stage."""
+    timings, metrics = {}, {}
+    for st in keys:
+        stage = _Stage(run, st, keys[st])
+        if stage.done():
+            _log(f"[{name}] {st}: done earlier, skipped")
+            saved = stage.final / "stage_result.json"
+            if saved.is_file():
+                metrics[st] = json.loads(saved.read_text())
+            t_file = stage.final / "seconds.txt"
+            timings[st] = float(t_file.read_text()) if t_file.is_file() else 0.0
+            continue
+        _log(f"[{name}] {st} ...")
+        t0 = time.perf_counter()
+        with stage as tmp:
+            result = call(st, tmp, metrics, timings)
+            el = time.perf_counter() - t0
+            (tmp / "stage_result.json").write_text(json.dumps(result, indent=2, default=float))
+            (tmp / "seconds.txt").write_text(f"{el:.3f}")
+        timings[st] = el
+        metrics[st] = json.loads((run / st / "stage_result.json").read_text())
+        _log(f"[{name}] {st}: {el:.1f} s")
+    return metrics, timings
+
+
 def run_config(cfg: dict, out_dir) -> dict:
     """:func:`run_experiment` on an already loaded (and checked) experiment dict."""
+    if cfg.get("kind") == "backlit":
+        from mitpiv.studies.backlit import run_backlit_config
+
+        return run_backlit_config(cfg, out_dir)
     run = Path(out_dir)
     run.mkdir(parents=True, exist_ok=True)
     (run / "experiment.json").write_text(json.dumps(cfg, indent=2, default=str))
@@ -468,40 +521,23 @@ def run_config(cfg: dict, out_dir) -> dict:
             continue
         prev = _hash([prev] + [cfg.get(p) for p in parts[st]])
         keys[st] = prev
-    timings, metrics = {}, {}
-    for st in keys:
-        stage = _Stage(run, st, keys[st])
-        if stage.done():
-            _log(f"[{cfg['name']}] {st}: done earlier, skipped")
-            saved = stage.final / "stage_result.json"
-            if saved.is_file():
-                metrics[st] = json.loads(saved.read_text())
-            t_file = stage.final / "seconds.txt"
-            timings[st] = float(t_file.read_text()) if t_file.is_file() else 0.0
-            continue
-        _log(f"[{cfg['name']}] {st} ...")
-        t0 = time.perf_counter()
-        with stage as tmp:
-            if st == "particles":
-                result = _stage_particles(cfg, tmp)
-            elif st == "render":
-                result = _stage_render(cfg, run, tmp)
-            elif st == "sensor":
-                result = _stage_sensor(cfg, run, tmp)
-            elif st == "reconstruct":
-                result = _stage_reconstruct(cfg, run, tmp, source)
-            elif st == "evaluate":
-                result = _stage_evaluate(cfg, run, tmp)
-            elif st == "piv":
-                result = _stage_piv(cfg, run, tmp)
-            else:
-                result = _stage_report(cfg, run, tmp, metrics, timings, source)
-            el = time.perf_counter() - t0
-            (tmp / "stage_result.json").write_text(json.dumps(result, indent=2, default=float))
-            (tmp / "seconds.txt").write_text(f"{el:.3f}")
-        timings[st] = el
-        metrics[st] = json.loads((run / st / "stage_result.json").read_text())
-        _log(f"[{cfg['name']}] {st}: {el:.1f} s")
+
+    def call(st, tmp, metrics, timings):
+        if st == "particles":
+            return _stage_particles(cfg, tmp)
+        if st == "render":
+            return _stage_render(cfg, run, tmp)
+        if st == "sensor":
+            return _stage_sensor(cfg, run, tmp)
+        if st == "reconstruct":
+            return _stage_reconstruct(cfg, run, tmp, source)
+        if st == "evaluate":
+            return _stage_evaluate(cfg, run, tmp)
+        if st == "piv":
+            return _stage_piv(cfg, run, tmp)
+        return _stage_report(cfg, run, tmp, metrics, timings, source)
+
+    metrics, timings = run_stages(cfg["name"], run, keys, call)
     from mitpiv.io.atomic import atomic_path
 
     out = {"name": cfg["name"], "seed": cfg["seed"], "evaluate": metrics.get("evaluate"), "piv": metrics.get("piv"),
