@@ -17,7 +17,7 @@ STUDIES = sorted(SCENES.glob("*/study.toml"))
 
 
 def test_study_scenes_exist():
-    assert {p.parent.name for p in STUDIES} >= {"tomo_mie", "multiplenoptic", "sa5x5"}
+    assert {p.parent.name for p in STUDIES} >= {"tomo_mie", "multiplenoptic", "sa5x5", "lfpiv_jet", "backlit_droplets"}
 
 
 @pytest.mark.parametrize("study", STUDIES, ids=lambda p: p.parent.name)
@@ -27,7 +27,7 @@ def test_every_point_is_a_valid_experiment(study, full):
     assert len(st["points"]) >= 6
     for ov in st["points"]:
         cfg = load_experiment(st["experiment"], {k: v for k, v in ov.items() if k != "label"})
-        assert Path(cfg["scene"]["xml"]).is_file()
+        assert cfg.get("kind") == "backlit" or Path(cfg["scene"]["xml"]).is_file()
     assert "label" in st["points"][0] or st["plot"]
 
 
@@ -54,26 +54,34 @@ def test_forward_scatter_is_brighter_than_backward(tmp_path):
     assert fwd > 2.0 * back
 
 
+def _imaged_per_pixel(particles_dir, cfg, sensor_id, res):
+    """Truth particles of frame 0 that project inside a pinhole sensor, per pixel."""
+    from mitpiv.io import read_truth
+    from mitpiv.reconstruct import mapping_from_metadata
+    from mitpiv.render.render import sensor_model
+    from mitpiv.render.scene import load_scene
+
+    pts = read_truth(particles_dir / "truth.npz")["positions_mm"][0]
+    sc = load_scene(particles_dir / "scene.xml", params=cfg["scene"]["params"])
+    sensor = next(s for s in sc.sensors() if s.id() == sensor_id)
+    uv = mapping_from_metadata({"camera": sensor_model(sensor)}).project(pts)
+    return np.all((uv >= 0) & (uv < res), axis=1).sum() / res**2
+
+
 def test_ppp_seeding_gives_the_density_asked_for(tmp_path):
     """seeding.ppp = 0.05 in tomo_mie: the particles imaged inside camera 0, counted by
     projecting the truth through the camera's own mapping, are 0.05 per pixel within three
     binomial standard deviations (the count inside is a binomial draw: 8 % at 1280)."""
     from mitpiv.io import read_truth
-    from mitpiv.reconstruct import mapping_from_metadata
-    from mitpiv.render.render import sensor_model
-    from mitpiv.render.scene import load_scene
     from mitpiv.studies.experiment import _Stage, _stage_particles
 
     cfg = load_experiment(SCENES / "tomo_mie" / "experiment.toml", {"scene.params.resolution": 160})
     with _Stage(tmp_path, "particles", "k") as t:
         _stage_particles(cfg, t)
-    pts = read_truth(tmp_path / "particles" / "truth.npz")["positions_mm"][0]
-    sc = load_scene(tmp_path / "particles" / "scene.xml", params=cfg["scene"]["params"])
-    m = mapping_from_metadata({"camera": sensor_model(sc.sensors()[0])})
-    uv = m.project(pts)
-    inside = np.all((uv >= 0) & (uv < 160), axis=1).sum()
+    inside = _imaged_per_pixel(tmp_path / "particles", cfg, "cam0", 160) * 160**2
     expected = 0.05 * 160**2
     assert inside == pytest.approx(expected, abs=3 * np.sqrt(expected))
+    pts = read_truth(tmp_path / "particles" / "truth.npz")["positions_mm"][0]
     assert len(pts) > 1.1 * inside  # the camera sees part of the box: more particles are seeded in all
 
 
@@ -95,6 +103,42 @@ def test_two_plenoptic_cameras_beat_one(tmp_path):
     # a tomographic method on plenoptic raw images is refused, naming the way out
     with pytest.raises(ConfigError, match="plenoptic"):
         _small(path, {**MP_SMALL, "reconstruction.method": "mart"}, tmp_path / "bad")
+
+
+LF_SMALL = {"scene.params.plen_resolution": 384, "scene.params.rays_per_particle": 5000,
+            "seeding.box_min_mm": [-1.9, -1.9, -1.5], "seeding.box_max_mm": [1.9, 1.9, 1.5],
+            "reconstruction.bounds_mm": [-1.9, 1.9, -1.9, 1.9, -1.5, 1.5], "piv.windows": [16], "piv.overlap": 0.5}
+
+
+def test_lfpiv_velocity_error_grows_with_pmr(tmp_path):
+    """lfpiv_jet: on a fixed sensor a larger pixels-per-microlens ratio buys angular samples
+    with lenslets (lateral resolution): at 0.5 particles per microlens the PMR 28 camera
+    (14 lenslets across) measures the jet far worse than PMR 7 (55 across)."""
+    path = SCENES / "lfpiv_jet" / "experiment.toml"
+    m = {pmr: _small(path, {**LF_SMALL, "scene.params.mla_pitch_um": 5.5 * pmr}, tmp_path / f"p{pmr}") for pmr in (7, 28)}
+    assert m[7]["piv"]["rms_magnitude"] < 0.5 * m[28]["piv"]["rms_magnitude"]
+    assert m[7]["evaluate"]["frame0"]["Q"] > m[28]["evaluate"]["frame0"]["Q"]
+    # the same density per microlens: 16x the lenslets seed about 16x the particles
+    assert 10 < m[7]["n_particles"] / m[28]["n_particles"] < 22
+    # with both densities given, a pinhole density sensor takes ppp
+    cfg = load_experiment(path, {**LF_SMALL, "seeding.density_sensor": "t0", "scene.params.tomo_resolution": 64})
+    from mitpiv.studies.experiment import _Stage, _stage_particles
+
+    with _Stage(tmp_path, "particles", "k") as t:
+        _stage_particles(cfg, t)
+    assert _imaged_per_pixel(tmp_path / "particles", cfg, "t0", 64) == pytest.approx(0.05, abs=3 * np.sqrt(0.05 / 64**2))
+
+
+def test_more_tomographic_cameras_raise_q_at_high_density(tmp_path):
+    """lfpiv_jet at 0.1 ppp: eight cameras leave fewer ghost particles than four (measured on
+    the reduced study: Q 0.52 -> 0.62)."""
+    path = SCENES / "lfpiv_jet" / "experiment.toml"
+    ov = {**LF_SMALL, "scene.params.tomo_resolution": 128, "seeding.density_sensor": "t0", "seeding.ppp": 0.1,
+          "reconstruction.method": "mart"}
+    q = {n: _small(path, {**ov, "render.sensors": [f"t{k}" for k in range(0, 8, 8 // n)]}, tmp_path / f"c{n}")
+         for n in (4, 8)}
+    assert q[8]["evaluate"]["frame0"]["Q"] > q[4]["evaluate"]["frame0"]["Q"] + 0.03
+    assert q[8]["evaluate"]["frame0"]["particles"]["u95_vox"][2] < q[4]["evaluate"]["frame0"]["particles"]["u95_vox"][2]
 
 
 SA_SMALL = {"scene.params.resolution": 128, "seeding.box_min_mm": [-5.0, -5.0, -2.0],
