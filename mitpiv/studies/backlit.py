@@ -33,7 +33,6 @@ and ``piv`` (velocity RMS [mm/s], correct-track fraction, outlier ratio).
 from __future__ import annotations
 
 import functools
-import json
 from pathlib import Path
 
 import numpy as np
@@ -211,10 +210,10 @@ def _stage_evaluate(cfg, run: Path, out: Path):
     for k in (0, 1):
         det = _load_detections(run / "detect" / f"detections_{k}.npz")
         ev = evaluate_detections(det, truth["positions_mm"][k], d_true, axis=view)
-        np.savez(out / f"errors_{k}.npz", pairs=ev.pop("pairs"), depth_error_diameters=ev.pop("depth_error_diameters"),
+        pairs = ev.pop("pairs")
+        np.savez(out / f"errors_{k}.npz", pairs=pairs, depth_error_diameters=ev.pop("depth_error_diameters"),
                  size_error_mm=ev.pop("size_error_mm"))
         m = np.full(len(det), -1)
-        pairs = np.load(out / f"errors_{k}.npz")["pairs"]
         m[pairs[:, 0]] = pairs[:, 1]
         dets.append(det)
         to_truth.append(m)
@@ -298,18 +297,11 @@ def _stage_report(cfg, run: Path, out: Path, metrics: dict, timings: dict):
 
 def run_backlit_config(cfg: dict, out_dir) -> dict:
     """Run a checked backlit experiment into ``out_dir`` (stages resume; see the module notes)."""
-    from mitpiv.io.atomic import atomic_path
-    from mitpiv.studies.experiment import _hash, run_stages
+    from mitpiv.studies.experiment import run_stages, write_run_results
 
     run = Path(out_dir)
-    run.mkdir(parents=True, exist_ok=True)
-    (run / "experiment.json").write_text(json.dumps(cfg, indent=2, default=str))
     parts = {"field": ("seed", "field"), "calibrate": ("camera", "calibration"), "render": ("camera", "render"),
              "detect": ("detection",), "evaluate": ("tracking",), "report": ()}
-    keys, prev = {}, ""
-    for st in STAGES:  # a stage reruns when its inputs or any earlier stage's changed
-        prev = _hash([prev] + [cfg.get(p) for p in parts[st]])
-        keys[st] = prev
     stages = {"field": lambda tmp: _stage_field(cfg, tmp), "calibrate": lambda tmp: _stage_calibrate(cfg, tmp),
               "render": lambda tmp: _stage_render(cfg, run, tmp), "detect": lambda tmp: _stage_detect(cfg, run, tmp),
               "evaluate": lambda tmp: _stage_evaluate(cfg, run, tmp)}
@@ -317,12 +309,10 @@ def run_backlit_config(cfg: dict, out_dir) -> dict:
     def call(st, tmp, metrics, timings):
         return stages[st](tmp) if st in stages else _stage_report(cfg, run, tmp, metrics, timings)
 
-    metrics, timings = run_stages(cfg["name"], run, keys, call)
+    metrics, timings = run_stages(cfg, run, parts, call)
     ev = metrics["evaluate"]
     out = {"name": cfg["name"], "seed": cfg["seed"], "kind": "backlit",
            "evaluate": {"frame0": ev["frame0"], "frame1": ev["frame1"]}, "piv": ev["tracking"],
            "n_particles": metrics["field"]["n_particles"], "dewarp_rms_mm": metrics["calibrate"]["dewarp_rms_mm"]}
-    for name, obj in (("metrics.json", out), ("timings.json", timings)):
-        with atomic_path(run / name) as tmp:
-            tmp.write_text(json.dumps(obj, indent=2, default=float))
+    write_run_results(run, out, timings)
     return out

@@ -70,14 +70,14 @@ def load_experiment(path, overrides: dict | None = None) -> dict:
     cfg = read_toml(path)
     for key, value in (overrides or {}).items():
         set_dotted(cfg, key, value)
+    cfg.setdefault("name", path.stem)
+    cfg.setdefault("seed", 0)
+    if not isinstance(cfg["seed"], int) or cfg["seed"] < 0:
+        raise ConfigError(f"experiment {path.name}: seed must be an integer >= 0, got {cfg['seed']!r}.")
     kind = cfg.get("kind", "particles")
     if kind == "backlit":
         from mitpiv.studies.backlit import check_backlit
 
-        cfg.setdefault("name", path.stem)
-        cfg.setdefault("seed", 0)
-        if not isinstance(cfg["seed"], int) or cfg["seed"] < 0:
-            raise ConfigError(f"experiment {path.name}: seed must be an integer >= 0, got {cfg['seed']!r}.")
         return check_backlit(cfg, path.name)
     if kind != "particles":
         raise ConfigError(f"experiment {path.name}: kind must be \"particles\" (the default: particle images, "
@@ -93,10 +93,6 @@ def load_experiment(path, overrides: dict | None = None) -> dict:
         raise ConfigError(f"experiment {path.name}: [scene] xml = {cfg['scene']['xml']!r} does not exist "
                           f"(resolved to {xml}).")
     cfg["scene"]["xml"] = str(xml)
-    cfg.setdefault("name", path.stem)
-    cfg.setdefault("seed", 0)
-    if not isinstance(cfg["seed"], int) or cfg["seed"] < 0:
-        raise ConfigError(f"experiment {path.name}: seed must be an integer >= 0, got {cfg['seed']!r}.")
     for t in _TABLES - {"sensor"}:
         cfg.setdefault(t, {})
     if "dt_s" not in cfg["flow"]:
@@ -473,12 +469,20 @@ def run_experiment(path, out_dir) -> dict:
     return run_config(load_experiment(path), out_dir)
 
 
-def run_stages(name: str, run: Path, keys: dict, call) -> tuple[dict, dict]:
-    """Run the stages ``keys`` (name -> input hash, in order) into ``run``: a stage whose
-    folder records the same hash is skipped (its saved result and time are read back);
-    otherwise ``call(stage, tmp_dir, metrics, timings)`` fills a temporary folder, which is
-    renamed into place with the result (``stage_result.json``) and wall time
-    (``seconds.txt``). Returns (metrics, timings) per stage."""
+def run_stages(cfg: dict, run: Path, parts: dict, call) -> tuple[dict, dict]:
+    """Run the stages of ``parts`` (stage name -> the config tables it reads, in order) into
+    the run folder ``run``. A stage's key hashes its tables and the previous stage's key, so
+    a changed setting reruns that stage and the ones after it; a stage whose folder records
+    the same key is skipped (its saved result and time are read back). Otherwise
+    ``call(stage, tmp_dir, metrics, timings)`` fills a temporary folder, which is renamed
+    into place with the result (``stage_result.json``) and wall time (``seconds.txt``).
+    Returns (metrics, timings) per stage."""
+    run.mkdir(parents=True, exist_ok=True)
+    (run / "experiment.json").write_text(json.dumps(cfg, indent=2, default=str))
+    name, keys, prev = cfg["name"], {}, ""
+    for st, tables in parts.items():
+        prev = _hash([prev] + [cfg.get(t) for t in tables])
+        keys[st] = prev
     timings, metrics = {}, {}
     for st in keys:
         stage = _Stage(run, st, keys[st])
@@ -510,17 +514,11 @@ def run_config(cfg: dict, out_dir) -> dict:
 
         return run_backlit_config(cfg, out_dir)
     run = Path(out_dir)
-    run.mkdir(parents=True, exist_ok=True)
-    (run / "experiment.json").write_text(json.dumps(cfg, indent=2, default=str))
     source = "sensor" if "sensor" in cfg else "render"
-    keys, prev = {}, ""
     parts = {"particles": ("seed", "seeding", "flow", "scene"), "render": ("scene", "render"), "sensor": ("sensor",),
              "reconstruct": ("reconstruction",), "evaluate": ("particles",), "piv": ("piv",), "report": ()}
-    for st in STAGES:
-        if st == "sensor" and source != "sensor":
-            continue
-        prev = _hash([prev] + [cfg.get(p) for p in parts[st]])
-        keys[st] = prev
+    if source != "sensor":
+        del parts["sensor"]
 
     def call(st, tmp, metrics, timings):
         if st == "particles":
@@ -537,12 +535,17 @@ def run_config(cfg: dict, out_dir) -> dict:
             return _stage_piv(cfg, run, tmp)
         return _stage_report(cfg, run, tmp, metrics, timings, source)
 
-    metrics, timings = run_stages(cfg["name"], run, keys, call)
-    from mitpiv.io.atomic import atomic_path
-
+    metrics, timings = run_stages(cfg, run, parts, call)
     out = {"name": cfg["name"], "seed": cfg["seed"], "evaluate": metrics.get("evaluate"), "piv": metrics.get("piv"),
            "n_particles": metrics.get("particles", {}).get("n_particles")}
-    for name, obj in (("metrics.json", out), ("timings.json", timings)):
+    write_run_results(run, out, timings)
+    return out
+
+
+def write_run_results(run: Path, metrics: dict, timings: dict) -> None:
+    """``metrics.json`` and ``timings.json`` of a finished run, each written atomically."""
+    from mitpiv.io.atomic import atomic_path
+
+    for name, obj in (("metrics.json", metrics), ("timings.json", timings)):
         with atomic_path(run / name) as tmp:
             tmp.write_text(json.dumps(obj, indent=2, default=float))
-    return out
