@@ -1,18 +1,26 @@
 """Command-line interface: ``mitpiv render``, ``info``, ``sensor``, ``decode``, ``refocus``,
-``reconstruct``, ``evaluate``, ``piv``, ``run``, ``sweep`` and ``bench``.
+``reconstruct``, ``evaluate``, ``piv``, ``run``, ``schema``, ``sweep`` and ``bench``.
 
-Thin: parses arguments, calls library functions, shows progress. Errors from mitpiv
-print as one line and exit with status 2.
+Thin: parses arguments, calls library functions, shows progress (``--quiet`` silences it),
+prints where results went. Errors from mitpiv print as one line and exit with status 2.
+Experiment settings come from the experiment schema (:mod:`mitpiv.studies.schema`): every
+field is settable as ``--set table.field=value``, the common ones by typed flags.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 
 from mitpiv.errors import MitpivError
 from mitpiv.reconstruct.images import RECONSTRUCT_METHODS
+
+#: Typed flags of ``mitpiv run`` and the experiment field each sets (unit in the name).
+RUN_FLAGS = {"seed": "seed", "method": "reconstruction.method", "iterations": "reconstruction.iterations",
+             "voxel-mm": "reconstruction.voxel_mm", "dt-s": "flow.dt_s", "spp": "render.spp",
+             "ppp": "seeding.ppp", "count": "seeding.count"}
 
 
 def _parse_define(items: list[str]) -> dict:
@@ -113,7 +121,8 @@ def cmd_refocus(args) -> int:
     else:
         raise MitpivError("refocus: give --z Z [Z ...] or --z-range START STOP COUNT (mm from the focal plane, + farther).")
     out = Path(args.out)
-    stack = focal_stack(lf, z, method=args.method, magnification=args.magnification, out=out, progress=True)
+    stack = focal_stack(lf, z, method=args.method, magnification=args.magnification, out=out,
+                        progress=_progress(args))
     k = int(np.argmin(np.abs(z)))
     write_preview(out.with_suffix(".png"), np.asarray(stack[k]))
     print(f"focal stack {stack.shape[0]} planes x {stack.shape[1]}x{stack.shape[2]} ({args.method}) -> {out}")
@@ -126,7 +135,8 @@ def _grid_from_args(args):
     from mitpiv.reconstruct import VoxelGrid
 
     b = args.bounds
-    return VoxelGrid.from_bounds((b[0], b[2], b[4]), (b[1], b[3], b[5]), args.voxel if len(args.voxel) == 3 else args.voxel[0])
+    return VoxelGrid.from_bounds((b[0], b[2], b[4]), (b[1], b[3], b[5]),
+                                 args.voxel_mm if len(args.voxel_mm) == 3 else args.voxel_mm[0])
 
 
 def cmd_reconstruct(args) -> int:
@@ -139,8 +149,9 @@ def cmd_reconstruct(args) -> int:
     from mitpiv.reconstruct.images import reconstruct_images
     from mitpiv.render.render import write_preview
 
-    if len(args.voxel) not in (1, 3):
-        raise MitpivError(f"reconstruct: --voxel takes 1 (cubic) or 3 (dx dy dz) sizes in mm, got {len(args.voxel)}.")
+    if len(args.voxel_mm) not in (1, 3):
+        raise MitpivError(f"reconstruct: --voxel-mm takes 1 (cubic) or 3 (dx dy dz) sizes in mm, got "
+                          f"{len(args.voxel_mm)}.")
     out = Path(args.out)
     if out.suffix != ".npz":
         raise MitpivError(f"reconstruct: --out must be a .npz file, got {str(out)!r}.")
@@ -148,14 +159,14 @@ def cmd_reconstruct(args) -> int:
     inputs = [read_exr(f) for f in args.images]
     images = [img if img.ndim == 2 else img[..., 0] for img, _ in inputs]
     metas = [m for _, m in inputs]
-    print(f"grid {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]} voxels of {grid.voxel_mm} mm, {len(images)} image(s), "
-          f"method {args.method}", file=sys.stderr)
+    logging.getLogger("mitpiv").info("grid %dx%dx%d voxels of %s mm, %d image(s), method %s", grid.shape[2],
+                                     grid.shape[1], grid.shape[0], grid.voxel_mm, len(images), args.method)
     t0 = time.perf_counter()
     vol, info = reconstruct_images(images, metas, grid, args.method, whites=args.white, iterations=args.iterations,
                                    mu=args.mu, weights=args.weights, interpolation=args.interpolation,
                                    preprocess=args.preprocess, combine=args.combine,
                                    threshold_k=None if args.threshold_k < 0 else args.threshold_k,
-                                   rays_per_pixel=args.rays_per_pixel, progress=True)
+                                   rays_per_pixel=args.rays_per_pixel, progress=_progress(args))
     elapsed = time.perf_counter() - t0
     metrics = {}
     if args.truth:
@@ -163,8 +174,7 @@ def cmd_reconstruct(args) -> int:
         from mitpiv.io import read_truth
 
         truth = analysis.truth_volume(read_truth(args.truth)["positions_mm"][args.frame], grid)
-        metrics = {"Q": analysis.quality_q(vol, truth), "Q*": analysis.quality_q_zero_mean(vol, truth),
-                   "Q'": analysis.rank_correlation(vol, truth), "SNR": analysis.plane_snr(vol)}
+        metrics = analysis.volume_quality(vol, truth)
     record = {"method": args.method, "images": [str(f) for f in args.images], "grid": grid.to_dict(),
               "seconds": elapsed, "metrics": metrics,
               "info": {k: v for k, v in info.items() if isinstance(v, int | float | str | list)}}
@@ -236,7 +246,7 @@ def cmd_piv(args) -> int:
     windows = [tuple(int(x) for x in w.split("x")) if "x" in w else int(w) for w in args.windows]
     if any(isinstance(w, tuple) and len(w) != 3 for w in windows):
         raise MitpivError(f"piv: --windows entries are N or WXxWYxWZ, got {args.windows}.")
-    dt, flow, t0 = args.dt, None, 0.0
+    dt, flow, t0 = args.dt_s, None, 0.0
     if args.truth:
         from mitpiv.physics.flows import flow_from_dict
 
@@ -250,7 +260,8 @@ def cmd_piv(args) -> int:
         dt = dt if dt else float(truth["times_s"][args.frame + 1] - t0)
     field = analysis.piv3d(va, vb, grid, windows=windows, overlap=args.overlap, deform=not args.no_deform,
                            interpolation=args.interpolation, normalised=args.normalised, threshold=args.threshold,
-                           replace=None if args.replace == "none" else args.replace, dt_s=dt, progress=True)
+                           replace=None if args.replace == "none" else args.replace, dt_s=dt,
+                           progress=_progress(args))
     metrics = {}
     if flow is not None:
         res = analysis.velocity_error(field, flow, t0_s=t0)
@@ -267,28 +278,51 @@ def cmd_piv(args) -> int:
     return 0
 
 
-def cmd_run(args) -> int:
-    from mitpiv.studies import run_experiment
+def _run_overrides(args) -> dict:
+    from mitpiv.studies.schema import parse_value
 
-    m = run_experiment(args.experiment, args.out)
-    pv = m.get("piv") or {}
-    ev = (m.get("evaluate") or {}).get("frame0", {})
-    if m.get("kind") == "backlit":
-        print(f"{m['name']}: {ev['n_matched']}/{ev['n_truth']} droplets detected, depth RMS "
-              f"{ev['depth_rms_diameters']:.2f} diameters, size RMS {ev['size_rms_mm'] * 1e3:.1f} um; "
-              f"{pv['n_correct']} correct tracks, velocity RMS {pv['rms_magnitude']:.1f} mm/s "
-              f"-> {args.out}/report/report.md")
+    ov = {}
+    for item in args.set or []:
+        if "=" not in item:
+            raise MitpivError(f"--set expects table.field=value (e.g. reconstruction.iterations=10), got {item!r}.")
+        k, v = item.split("=", 1)
+        ov[k.strip()] = parse_value(v.strip())
+    for flag, key in RUN_FLAGS.items():
+        v = getattr(args, flag.replace("-", "_"), None)
+        if v is not None:
+            ov[key] = v
+    return ov
+
+
+def cmd_run(args) -> int:
+    from mitpiv.studies import check_experiment, run_experiment
+
+    overrides = _run_overrides(args)
+    if args.check:
+        cfg = check_experiment(args.experiment, overrides)
+        print(f"{args.experiment}: a valid {cfg.kind} experiment ({cfg.name}, seed {cfg.seed}); nothing was run.")
         return 0
-    print(f"{m['name']}: Q {ev.get('Q', float('nan')):.3f}, particles detected "
-          f"{100 * ev.get('particles', {}).get('detection_rate', float('nan')):.1f} %, PIV RMS error "
-          f"{', '.join(f'{x:.4f}' for x in pv.get('rms_vox', []))} voxels -> {args.out}/report/report.md")
+    if args.out is None:
+        raise MitpivError("run: give --out DIR (the run folder), or --check to validate only.")
+    result = run_experiment(args.experiment, args.out, overrides=overrides, progress=_progress(args))
+    print(f"{result.headline()} -> {args.out}/report/report.md")
+    return 0
+
+
+def cmd_schema(args) -> int:
+    from mitpiv.studies.kinds import get_kind
+    from mitpiv.studies.schema import describe
+
+    kind = get_kind(args.kind, source="schema")
+    print(describe(kind.schema, title=f"Experiment kind {kind.name!r}: {kind.describe}"))
     return 0
 
 
 def cmd_sweep(args) -> int:
     from mitpiv.studies import run_sweep
 
-    df = run_sweep(args.study, args.out, scheduler=args.scheduler, workers=args.workers, full=args.full)
+    df = run_sweep(args.study, args.out, scheduler=args.scheduler, workers=args.workers, full=args.full,
+                   progress=_progress(args))
     ok = int((df["status"] == "ok").sum())
     print(f"{ok}/{len(df)} points ok -> {args.out}/results.csv, results.parquet")
     for _, row in df[df["status"] != "ok"].iterrows():
@@ -305,8 +339,41 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def _progress(args) -> bool:
+    return not getattr(args, "quiet", False)
+
+
+def _schema_field(key: str):
+    """The FieldInfo of a dotted experiment key in the tomo schema (a union's first member)."""
+    from mitpiv.studies.kinds.tomo import schema
+    from mitpiv.studies.schema import _models_in
+
+    node = schema()
+    *tables, name = key.split(".")
+    for t in tables:
+        node = _models_in(node.model_fields[t].annotation)[0]
+    return node.model_fields[name]
+
+
+def _flag_kwargs(key: str) -> dict:
+    """argparse type, choices and help of a typed ``mitpiv run`` flag, from the schema."""
+    import typing
+
+    fi = _schema_field(key)
+    ann = fi.annotation
+    while typing.get_origin(ann) is not None and typing.get_origin(ann) is not typing.Literal:
+        ann = typing.get_args(ann)[0]  # Annotated[...] / X | None / a union: its first member
+    kw = {"help": f"{fi.description} (sets {key})", "default": None}
+    if typing.get_origin(ann) is typing.Literal:
+        kw.update(type=str, choices=list(typing.get_args(ann)))
+    else:
+        kw["type"] = int if ann is int else float
+    return kw
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="mitpiv", description="Physically based rendering testbed for volumetric PIV.")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bars or progress messages")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render every sensor of a scene XML for each frame to EXR + PNG")
     r.add_argument("scene", help="scene XML file")
@@ -361,7 +428,8 @@ def main(argv=None) -> int:
     c.add_argument("--method", choices=RECONSTRUCT_METHODS, default="mart")
     c.add_argument("--bounds", type=float, nargs=6, required=True, metavar=("XMIN", "XMAX", "YMIN", "YMAX", "ZMIN", "ZMAX"),
                    help="volume [mm]")
-    c.add_argument("--voxel", type=float, nargs="+", required=True, help="voxel size [mm]: one (cubic) or three (dx dy dz)")
+    c.add_argument("--voxel-mm", "--voxel", dest="voxel_mm", type=float, nargs="+", required=True,
+                   help="voxel size [mm]: one (cubic) or three (dx dy dz) (--voxel: deprecated)")
     c.add_argument("--iterations", type=int, default=5)
     c.add_argument("--mu", type=float, default=1.0, help="MART relaxation (0, 2)")
     c.add_argument("--weights", choices=["circle", "gaussian"], default="circle")
@@ -396,14 +464,23 @@ def main(argv=None) -> int:
     v.add_argument("--normalised", action="store_true", help="normalised cross-correlation")
     v.add_argument("--threshold", type=float, default=2.0, help="universal outlier detection threshold")
     v.add_argument("--replace", choices=["median", "interpolation", "none"], default="median")
-    v.add_argument("--dt", type=float, default=None, help="time between the frames [s]: velocities in mm/s")
+    v.add_argument("--dt-s", "--dt", dest="dt_s", type=float, default=None,
+                   help="time between the frames [s]: velocities in mm/s (--dt: deprecated)")
     v.add_argument("--truth", default=None, help="truth .npz with the flow: velocity error against it")
     v.add_argument("--frame", type=int, default=0, help="truth frame of vol_a")
     v.set_defaults(func=cmd_piv)
     x = sub.add_parser("run", help="run (or resume) an experiment TOML: render, reconstruct, evaluate, PIV, report")
     x.add_argument("experiment", help="experiment .toml")
-    x.add_argument("--out", required=True, help="run folder (stages resume when rerun)")
+    x.add_argument("--out", default=None, help="run folder (stages resume when rerun)")
+    x.add_argument("--check", action="store_true", help="validate the experiment (every table) and run nothing")
+    x.add_argument("--set", action="append", metavar="TABLE.FIELD=VALUE",
+                   help="set any experiment field (a TOML value), e.g. --set piv.windows=[48,32]; see 'mitpiv schema'")
+    for flag, key in RUN_FLAGS.items():
+        x.add_argument(f"--{flag}", **_flag_kwargs(key))
     x.set_defaults(func=cmd_run)
+    sc = sub.add_parser("schema", help="print every experiment table and field with its unit, default and range")
+    sc.add_argument("--kind", default="tomo", help="experiment kind: tomo (default) or backlit")
+    sc.set_defaults(func=cmd_schema)
     w = sub.add_parser("sweep", help="run a parameter study (grid or list of experiment overrides) on Dask")
     w.add_argument("study", help="study .toml")
     w.add_argument("--out", required=True, help="sweep folder (results table, one run folder per point)")
@@ -420,6 +497,12 @@ def main(argv=None) -> int:
     b.add_argument("--seed", type=int, default=0, help="seed of the particle field")
     b.set_defaults(func=cmd_bench)
     args = p.parse_args(argv)
+    from mitpiv.progress import set_quiet
+
+    if args.quiet:
+        set_quiet(True)
+    logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO, format="%(message)s",
+                        stream=sys.stderr)
     try:
         return args.func(args)
     except MitpivError as e:

@@ -1,8 +1,21 @@
-"""Experiments and studies: the runner that takes a TOML experiment from particles to an
-evaluated reconstruction and vector field (:func:`run_experiment`), and parameter sweeps
-over experiments on Dask (:func:`run_sweep`)."""
+"""Experiments and studies: the runner (:mod:`~mitpiv.studies.runner`) that validates an
+experiment TOML against its kind's schema and takes it through the kind's stages
+(:func:`run_experiment`), the kinds (:mod:`~mitpiv.studies.kinds`: ``tomo``, ``backlit``),
+reports (:mod:`~mitpiv.studies.report`), and parameter sweeps over experiments on Dask
+(:func:`run_sweep`)."""
 
-from mitpiv.studies.experiment import STAGES, load_experiment, run_experiment
-from mitpiv.studies.sweep import load_study, plot_sweep, run_sweep
+from mitpiv.studies.kinds.tomo import STAGES
+from mitpiv.studies.runner import RunResult, check_experiment, load_experiment, run_config, run_experiment
+from mitpiv.studies.sweep import load_study, run_sweep
 
-__all__ = ["run_experiment", "load_experiment", "STAGES", "run_sweep", "load_study", "plot_sweep"]
+
+def __getattr__(name):
+    if name == "plot_sweep":
+        from mitpiv.studies.report import plot_sweep
+
+        return plot_sweep
+    raise AttributeError(name)
+
+
+__all__ = ["run_experiment", "run_config", "load_experiment", "check_experiment", "RunResult", "STAGES", "run_sweep",
+           "load_study", "plot_sweep"]

@@ -33,13 +33,27 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
-import sys
+import logging
 import time
 import traceback
 from pathlib import Path
 
 from mitpiv.errors import ConfigError
-from mitpiv.studies.experiment import load_experiment, read_toml, run_config
+from mitpiv.progress import Progress, bar
+from mitpiv.studies.runner import load_experiment, run_config
+from mitpiv.studies.schema import read_toml
+
+log = logging.getLogger(__name__)
+
+__all__ = ["load_study", "run_sweep", "run_point", "point_id", "flatten", "plot_sweep"]
+
+
+def __getattr__(name):
+    if name == "plot_sweep":  # moved to the report module, where every figure is made
+        from mitpiv.studies.report import plot_sweep
+
+        return plot_sweep
+    raise AttributeError(name)
 
 _STUDY_KEYS = {"name", "experiment", "grid", "points", "plot", "workers", "full"}
 
@@ -82,10 +96,11 @@ def point_id(overrides: dict) -> str:
     return hashlib.sha256(json.dumps(overrides, sort_keys=True, default=str).encode()).hexdigest()[:12]
 
 
-def _flatten(prefix, obj, out):
+def flatten(prefix, obj, out):
+    """Flatten nested metrics into table columns: ``a.b``; a 3-vector ``v`` gives ``v_x, v_y, v_z``."""
     if isinstance(obj, dict):
         for k, v in obj.items():
-            _flatten(f"{prefix}.{k}" if prefix else str(k), v, out)
+            flatten(f"{prefix}.{k}" if prefix else str(k), v, out)
     elif isinstance(obj, list) and all(isinstance(x, int | float) for x in obj) and len(obj) == 3:
         for axis, v in zip("xyz", obj, strict=True):
             out[f"{prefix}_{axis}"] = v
@@ -99,13 +114,7 @@ def run_point(experiment_path: str, overrides: dict, out_dir: str) -> dict:
     t0 = time.perf_counter()
     try:
         cfg = load_experiment(experiment_path, {k: v for k, v in overrides.items() if k != "label"})
-        m = run_config(cfg, out_dir)
-        metrics = {}
-        _flatten("", {"frame0": (m.get("evaluate") or {}).get("frame0"), "frame1": (m.get("evaluate") or {}).get("frame1"),
-                      "piv": m.get("piv")}, metrics)
-        timings = json.loads((Path(out_dir) / "timings.json").read_text())
-        row.update({"status": "ok", "error": "", **metrics, **{f"seconds.{k}": v for k, v in timings.items()},
-                    "seconds.total": sum(timings.values())})
+        row.update({"status": "ok", "error": "", **run_config(cfg, out_dir).row()})
     except Exception as e:  # noqa: BLE001 - a failed point is a result, recorded in the table
         row.update({"status": "error", "error": f"{type(e).__name__}: {e}",
                     "traceback": traceback.format_exc(limit=3)})
@@ -126,53 +135,8 @@ def _write_table(rows, out: Path):
     return df
 
 
-def plot_sweep(table, x: str, y: str, path, *, group: str | None = None) -> None:
-    """PNG of metric ``y`` against parameter ``x`` (names as in the table, "param." optional),
-    one line per value of ``group``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from mitpiv.io.atomic import atomic_path
-
-    df = table[table["status"] == "ok"] if "status" in table else table
-
-    def col(name):
-        for c in (name, f"param.{name}"):
-            if c in table.columns:
-                return c
-        raise ConfigError(f"plot_sweep: no column {name!r}; the table has {sorted(table.columns)}.")
-
-    cx, cy = col(x), col(y)
-    import pandas as pd
-
-    numeric = pd.api.types.is_numeric_dtype(df[cx])
-    cats = list(dict.fromkeys(df[cx]))  # a categorical x (e.g. labels) keeps the study's order
-    fig, ax = plt.subplots(figsize=(6.4, 4.4))
-    groups = [(None, df)] if group is None else list(df.groupby(col(group), sort=False))
-    for g, sub in groups:
-        lab = None if g is None else f"{group} = {g}"
-        if numeric:
-            sub = sub.sort_values(cx)
-            ax.plot(sub[cx], sub[cy], "o-", label=lab)
-        else:
-            ax.plot([cats.index(v) for v in sub[cx]], sub[cy], "o", ms=7, label=lab)
-    if not numeric:
-        ax.set_xticks(range(len(cats)), [str(c) for c in cats], rotation=30, ha="right", fontsize=8)
-        ax.grid(True, axis="y", alpha=0.3)
-    ax.set_xlabel(x)
-    ax.set_ylabel(y)
-    if group is not None:
-        ax.legend(fontsize=8)
-    fig.tight_layout()
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-
-
 def run_sweep(path, out_dir, scheduler=None, *, workers: int | None = None, full: bool = False,
-              progress: bool = True):
+              progress: Progress = None):
     """Run every point of the study in ``path`` on Dask; returns the results table (pandas).
 
     scheduler : None: a LocalCluster of ``workers`` single-threaded processes (default: the
@@ -182,19 +146,26 @@ def run_sweep(path, out_dir, scheduler=None, *, workers: int | None = None, full
     from dask.distributed import Client, LocalCluster, as_completed
 
     st = load_study(path, full=full)
+    # every point's experiment is validated before any point runs: a typo fails now, not in a worker
+    for ov in st["points"]:
+        try:
+            load_experiment(st["experiment"], {k: v for k, v in ov.items() if k != "label"})
+        except ConfigError as e:
+            raise ConfigError(f"study {Path(path).name}: point {ov}: {e}") from None
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    from mitpiv.io.records import read_json
+    from mitpiv.studies.report import plot_sweep
+
     rows = {}
     for ov in st["points"]:
         f = out / "points" / point_id(ov) / "row.json"
         if f.is_file():
-            row = json.loads(f.read_text())
+            row = read_json(f)
             if row.get("status") == "ok":
                 rows[row["point"]] = row
     todo = [ov for ov in st["points"] if point_id(ov) not in rows]
-    if progress:
-        print(f"sweep {st['name']}: {len(st['points'])} points, {len(rows)} done earlier, {len(todo)} to run",
-              file=sys.stderr, flush=True)
+    log.info("sweep %s: %d points, %d done earlier, %d to run", st["name"], len(st["points"]), len(rows), len(todo))
     cluster = None
     if todo:
         if scheduler is None:
@@ -206,17 +177,18 @@ def run_sweep(path, out_dir, scheduler=None, *, workers: int | None = None, full
         try:
             futures = [client.submit(run_point, str(st["experiment"]), ov, str(out / "points" / point_id(ov)),
                                      key=f"point-{point_id(ov)}", retries=2, pure=False) for ov in todo]
-            for k, fut in enumerate(as_completed(futures), 1):
+            points = bar(len(todo), desc=f"sweep {st['name']}", progress=progress, unit="point")
+            for fut in as_completed(futures):
                 row = fut.result()
-                from mitpiv.io.atomic import atomic_path
+                from mitpiv.io.records import write_json
 
-                with atomic_path(out / "points" / row["point"] / "row.json") as tmp:
-                    tmp.write_text(json.dumps(row, default=str))
+                write_json(out / "points" / row["point"] / "row.json", row)
                 rows[row["point"]] = row
                 _write_table(list(rows.values()), out)
-                if progress:
-                    print(f"sweep {st['name']}: {k}/{len(todo)} finished ({row['point']}: {row['status']}"
-                          f"{' - ' + row['error'] if row['status'] != 'ok' else ''})", file=sys.stderr, flush=True)
+                points.update()
+                log.info("sweep %s: point %s: %s%s", st["name"], row["point"], row["status"],
+                         " - " + row["error"] if row["status"] != "ok" else "")
+            points.close()
         finally:
             client.close()
             if cluster is not None:

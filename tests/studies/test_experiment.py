@@ -2,6 +2,7 @@
 after a failed stage, only changed stages rerun, bad experiment files."""
 
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +49,7 @@ def write(tmp_path, text, name="exp.toml"):
     return p
 
 
-def test_run_rerun_and_resume(tmp_path, capsys):
+def test_run_rerun_and_resume(tmp_path, caplog):
     exp = write(tmp_path, BASE)
     m = run_experiment(exp, tmp_path / "run")
     run = tmp_path / "run"
@@ -62,32 +63,44 @@ def test_run_rerun_and_resume(tmp_path, capsys):
     assert set(timings) == {"particles", "render", "reconstruct", "evaluate", "piv", "report"}
     report = (run / "report" / "report.md").read_text()
     assert "| 0 |" in report and "RMS error" in report
-    capsys.readouterr()
     # a rerun skips every stage and returns the same metrics
-    assert run_experiment(exp, run) == m
-    assert capsys.readouterr().err.count("done earlier, skipped") == 6
+    with caplog.at_level(logging.INFO, logger="mitpiv"):
+        assert run_experiment(exp, run).metrics == m.metrics
+    assert caplog.text.count("done earlier, skipped") == 6
     # the same seed in a new folder reproduces the metrics exactly
-    assert run_experiment(exp, tmp_path / "again") == m
+    assert run_experiment(exp, tmp_path / "again").metrics == m.metrics
     # a changed PIV setting reruns only piv and report
     write(tmp_path, BASE.replace("windows = [32, 16]", "windows = [32, 24]"))
-    capsys.readouterr()
-    m2 = run_experiment(exp, run)
-    err = capsys.readouterr().err
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="mitpiv"):
+        m2 = run_experiment(exp, run)
+    err = caplog.text
     assert err.count("done earlier, skipped") == 4 and "piv ..." in err and "report ..." in err
     assert m2["evaluate"] == m["evaluate"] and m2["piv"] != m["piv"]
 
 
-def test_failed_stage_leaves_nothing_and_resumes(tmp_path, capsys):
-    exp = write(tmp_path, BASE.replace('method = "mart"', 'method = "tomo"'))
-    with pytest.raises(ConfigError, match="method"):
+def test_failed_stage_leaves_nothing_and_resumes(tmp_path, caplog, monkeypatch):
+    """A stage that fails (here reconstruction, made to raise) leaves no stage folder and no
+    temporary folder; the rerun resumes after the last finished stage."""
+    from mitpiv.studies.kinds import tomo
+
+    exp = write(tmp_path, BASE)
+
+    def broken(*a, **k):
+        raise ConfigError("reconstruct: simulated failure")
+
+    monkeypatch.setattr("mitpiv.reconstruct.images.reconstruct_images", broken)
+    with pytest.raises(ConfigError, match="simulated"):
         run_experiment(exp, tmp_path / "run")
+    monkeypatch.undo()
+    assert tomo.STAGES[:2] == ("particles", "render")
     run = tmp_path / "run"
     assert (run / "render" / "stage.json").is_file()
     assert not (run / "reconstruct").exists() and not list(run.glob(".*.tmp"))
     write(tmp_path, BASE.replace('method = "mart"', 'method = "mlos"').replace("iterations = 3\n", ""))
-    capsys.readouterr()
-    m = run_experiment(exp, run)
-    err = capsys.readouterr().err
+    with caplog.at_level(logging.INFO, logger="mitpiv"):
+        m = run_experiment(exp, run)
+    err = caplog.text
     assert "particles: done earlier, skipped" in err and "render: done earlier, skipped" in err
     assert m["evaluate"]["frame1"]["Q"] > 0.2
 
@@ -100,6 +113,15 @@ def test_cli_run(tmp_path, capsys):
     assert "report.md" in capsys.readouterr().out
     assert main(["run", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "x")]) == 2
     assert "does not exist" in capsys.readouterr().err and not (tmp_path / "x").exists()
+    # a mistyped method fails before anything is rendered, naming the table, key, value and choices
+    assert main(["run", str(exp), "--out", str(tmp_path / "y"), "--method", "marts"]) == 2
+    assert not (tmp_path / "y").exists()
+    assert main(["run", str(exp), "--out", str(tmp_path / "y"), "--set", "reconstruction.method=marts"]) == 2
+    err = capsys.readouterr().err
+    assert "[reconstruction] method" in err and "'marts'" in err and "'smart'" in err and not (tmp_path / "y").exists()
+    # --check validates only; --set and typed flags reach the experiment
+    assert main(["run", str(exp), "--check", "--set", "piv.windows=[48, 32]", "--voxel-mm", "0.2"]) == 0
+    assert "valid tomo experiment" in capsys.readouterr().out
 
 
 def test_sensor_stage(tmp_path):
@@ -118,6 +140,10 @@ def test_sensor_stage(tmp_path):
     (BASE.replace("bounds_mm = [-4.0, 4.0, -4.0, 4.0, -1.6, 1.6]", "bounds_mm = [1, 2]"), "bounds_mm"),
     (BASE.replace("seed = 3", "seed = -1"), "seed"),
     (BASE.replace("[flow]", "[flow"), "not valid TOML"),
+    (BASE.replace('method = "mart"', 'method = "tomo"'), r"\[reconstruction\] method: 'tomo' is not a valid choice"),
+    (BASE.replace("iterations = 3", "iteration = 3"), "Did you mean 'iterations'"),
+    (BASE.replace('kind = "uniform"', 'kind = "uniformm"'), "'uniform'"),
+    (BASE.replace("velocity_mm_s =", "velocity_mms ="), "Did you mean 'velocity_mm_s'"),
 ])
 def test_bad_experiment_files(tmp_path, text, match):
     with pytest.raises(ConfigError, match=match):
@@ -138,14 +164,14 @@ experiment = "exp.toml"
 [[points]]
 "reconstruction.iterations" = 3
 [[points]]
-"reconstruction.method" = "tomo"
+"render.sensors" = ["camX"]
 [plot]
 x = "reconstruction.iterations"
 y = "frame0.Q"
 """, "study.toml")
     df = run_sweep(study, tmp_path / "sweep", workers=2)
     assert list(df["status"]) == ["ok", "ok", "error"]
-    assert "method" in df["error"].iloc[2] and df["frame0.Q"].iloc[:2].notna().all()
+    assert "not in the scene" in df["error"].iloc[2] and df["frame0.Q"].iloc[:2].notna().all()
     q = df["frame0.Q"].iloc[:2]
     assert q.min() > 0.5 and q.iloc[0] != q.iloc[1]  # two reconstructions of the same seeded field
     for p in df["point"].iloc[:2]:
@@ -168,7 +194,9 @@ def test_bad_study_files(tmp_path):
     for text, match in (("experiment = \"exp.toml\"\n", "neither"),
                         ("experiment = \"exp.toml\"\n[grid]\n\"seed\" = 3\n", "non-empty list"),
                         ("[grid]\n\"seed\" = [1]\n", "base experiment"),
-                        ("experiment = \"exp.toml\"\nfoo = 1\n[grid]\n\"seed\" = [1]\n", "unknown key")):
+                        ("experiment = \"exp.toml\"\nfoo = 1\n[grid]\n\"seed\" = [1]\n", "unknown key"),
+                        # a bad point is found before any point runs
+                        ("experiment = \"exp.toml\"\n[grid]\n\"piv.overlap\" = [0.5, 1.5]\n", "overlap")):
         with pytest.raises(ConfigError, match=match):
             run_sweep(write(tmp_path, text, "s.toml"), tmp_path / "sw")
 
@@ -184,17 +212,18 @@ def test_default_experiment_matches_the_scene_particles(tmp_path):
     spec = importlib.util.spec_from_file_location("make_particles", SCENE.parent / "make_particles.py")
     mp = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mp)
-    assert tuple(cfg["seeding"]["box_min_mm"]) == mp.BOX_MIN and tuple(cfg["seeding"]["box_max_mm"]) == mp.BOX_MAX
-    assert cfg["flow"]["dt_s"] == mp.DT_S and cfg["seeding"]["proxy_radius_mm"] == mp.PROXY_RADIUS_MM
+    assert tuple(cfg.seeding.box_min_mm) == mp.BOX_MIN and tuple(cfg.seeding.box_max_mm) == mp.BOX_MAX
+    assert cfg.flow.dt_s == mp.DT_S and cfg.seeding.proxy_radius_mm == mp.PROXY_RADIUS_MM
     from mitpiv.io import read_truth
     from mitpiv.physics.seeding import seed_box
 
-    s = {k: v for k, v in cfg["seeding"].items() if k not in ("box_min_mm", "box_max_mm", "proxy_radius_mm")}
-    p = seed_box(mp.BOX_MIN, mp.BOX_MAX, seed=cfg["seed"], **s)
+    s = cfg.seeding.model_dump(exclude={"box_min_mm", "box_max_mm", "proxy_radius_mm", "density_sensor"},
+                               exclude_none=True)
+    p = seed_box(mp.BOX_MIN, mp.BOX_MAX, seed=cfg.seed, **s)
     mp.main(["--out", str(tmp_path)])  # the scene's own particle script, into a scratch folder
     truth = read_truth(tmp_path / "truth.npz")
     np.testing.assert_array_equal(p.positions_mm, truth["positions_mm"][0])
-    flow = {k: v for k, v in cfg["flow"].items() if k != "dt_s"}
+    flow = {k: v for k, v in cfg.flow.model_dump().items() if k != "dt_s"}
     assert all(np.allclose(truth["flow"][k], v) for k, v in flow.items() if k != "kind")
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mitpiv.errors import ConfigError
-from mitpiv.studies.experiment import load_experiment, run_config
+from mitpiv.studies import load_experiment, run_config
 from mitpiv.studies.sweep import load_study
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
@@ -27,7 +27,7 @@ def test_every_point_is_a_valid_experiment(study, full):
     assert len(st["points"]) >= 6
     for ov in st["points"]:
         cfg = load_experiment(st["experiment"], {k: v for k, v in ov.items() if k != "label"})
-        assert cfg.get("kind") == "backlit" or Path(cfg["scene"]["xml"]).is_file()
+        assert cfg.kind == "backlit" or Path(cfg.scene.xml).is_file()
     assert "label" in st["points"][0] or st["plot"]
 
 
@@ -43,11 +43,7 @@ def test_forward_scatter_is_brighter_than_backward(tmp_path):
     ov = {"scene.params.resolution": 64, "seeding.box_min_mm": [-2.0, -2.0, -1.0], "seeding.box_max_mm": [2.0, 2.0, 1.0],
           "reconstruction.bounds_mm": [-2.0, 2.0, -2.0, 2.0, -1.0, 1.0], "render.sensors": ["cam0", "cam2"]}
     cfg = load_experiment(SCENES / "tomo_mie" / "experiment.toml", ov)
-    from mitpiv.studies.experiment import _Stage, _stage_particles, _stage_render
-
-    for st, fn in (("particles", lambda t: _stage_particles(cfg, t)), ("render", lambda t: _stage_render(cfg, tmp_path, t))):
-        with _Stage(tmp_path, st, "k") as t:
-            fn(t)
+    run_config(cfg, tmp_path, until="render")
     fwd = read_exr(tmp_path / "render" / "cam0_frame000.exr")[0].sum()
     back = read_exr(tmp_path / "render" / "cam2_frame000.exr")[0].sum()
     assert not (tmp_path / "render" / "cam1_frame000.exr").exists()  # only the sensors asked for
@@ -62,7 +58,7 @@ def _imaged_per_pixel(particles_dir, cfg, sensor_id, res):
     from mitpiv.render.scene import load_scene
 
     pts = read_truth(particles_dir / "truth.npz")["positions_mm"][0]
-    sc = load_scene(particles_dir / "scene.xml", params=cfg["scene"]["params"])
+    sc = load_scene(particles_dir / "scene.xml", params=cfg.scene.params)
     sensor = next(s for s in sc.sensors() if s.id() == sensor_id)
     uv = mapping_from_metadata({"camera": sensor_model(sensor)}).project(pts)
     return np.all((uv >= 0) & (uv < res), axis=1).sum() / res**2
@@ -73,11 +69,9 @@ def test_ppp_seeding_gives_the_density_asked_for(tmp_path):
     projecting the truth through the camera's own mapping, are 0.05 per pixel within three
     binomial standard deviations (the count inside is a binomial draw: 8 % at 1280)."""
     from mitpiv.io import read_truth
-    from mitpiv.studies.experiment import _Stage, _stage_particles
 
     cfg = load_experiment(SCENES / "tomo_mie" / "experiment.toml", {"scene.params.resolution": 160})
-    with _Stage(tmp_path, "particles", "k") as t:
-        _stage_particles(cfg, t)
+    run_config(cfg, tmp_path, until="particles")
     inside = _imaged_per_pixel(tmp_path / "particles", cfg, "cam0", 160) * 160**2
     expected = 0.05 * 160**2
     assert inside == pytest.approx(expected, abs=3 * np.sqrt(expected))
@@ -122,10 +116,7 @@ def test_lfpiv_velocity_error_grows_with_pmr(tmp_path):
     assert 10 < m[7]["n_particles"] / m[28]["n_particles"] < 22
     # with both densities given, a pinhole density sensor takes ppp
     cfg = load_experiment(path, {**LF_SMALL, "seeding.density_sensor": "t0", "scene.params.tomo_resolution": 64})
-    from mitpiv.studies.experiment import _Stage, _stage_particles
-
-    with _Stage(tmp_path, "particles", "k") as t:
-        _stage_particles(cfg, t)
+    run_config(cfg, tmp_path, until="particles")
     assert _imaged_per_pixel(tmp_path / "particles", cfg, "t0", 64) == pytest.approx(0.05, abs=3 * np.sqrt(0.05 / 64**2))
 
 

@@ -1,0 +1,457 @@
+"""Particle-image experiments (``kind = "tomo"``, the default; ``"particles"`` is its old
+name): seeded particles advected by a flow, rendered by the scene's cameras (pinhole,
+distorted, thin-lens or plenoptic), an optional sensor model, a volume reconstruction, the
+particles found in it, 3D PIV, and every result scored against the truth.
+
+Experiment file (paths relative to it; ``mitpiv schema`` lists every key with its unit,
+default and range)::
+
+    name = "tomo4-small"
+    seed = 0
+    [scene]            xml = "scene.xml"; params = { resolution = 256 }
+    [seeding]          box_min_mm, box_max_mm, one of count | concentration_per_mm3 | ppp |
+                       particles_per_microlens (ppp and particles_per_microlens may go
+                       together: the density sensor's kind picks), diameter_um, ...
+    [flow]             kind = "vortex_ring", ... (mitpiv.physics.flows), dt_s
+    [render]           spp, sensors
+    [sensor]           the sensor model (mitpiv.imaging.SensorModel); optional
+    [reconstruction]   method, bounds_mm, voxel_mm, iterations, ...
+    [piv]              windows, overlap, deform, interpolation, ...
+    [particles]        method, threshold_rel, radius_voxels
+
+Stages: ``particles`` (seeding, advection, PLY files, truth), ``render`` (EXR per camera
+and frame), ``sensor`` (counts; only with a [sensor] table), ``reconstruct`` (volume per
+frame), ``evaluate`` (particles and quality per frame), ``piv`` (vector field and its error
+against the flow), ``report`` (report.md and figures, :mod:`mitpiv.studies.report`).
+"""
+
+from __future__ import annotations
+
+import shutil
+from functools import cache
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import Field, field_validator, model_validator
+
+from mitpiv.errors import ConfigError
+from mitpiv.studies.runner import Kind, Stage, StageContext
+from mitpiv.studies.schema import Table, Vec3, discriminated, model_from_signature
+
+FRAMES = (0, 1)
+STAGES = ("particles", "render", "sensor", "reconstruct", "evaluate", "piv", "report")
+
+PosFloat = Annotated[float, Field(gt=0)]
+
+
+# ------------------------------------------------------------------------------- schema
+class SceneTable(Table):
+    """The scene: a Mitsuba scene XML with mitpiv's plugins and its $parameters."""
+
+    xml: str = Field(..., description="scene XML file (relative to the experiment file)")
+    params: dict[str, str | int | float | bool] = Field(
+        default_factory=dict, description="$name substitutions of the scene XML")
+
+
+class SeedingTable(Table):
+    """Particles seeded uniformly in a box (mitpiv.physics.seeding.seed_box)."""
+
+    box_min_mm: Vec3 = Field(..., description="lower corner of the seeding box [mm]")
+    box_max_mm: Vec3 = Field(..., description="upper corner of the seeding box [mm]")
+    count: Annotated[int, Field(ge=0)] | None = Field(None, description="number of particles")
+    concentration_per_mm3: PosFloat | None = Field(None, description="particles per mm^3")
+    ppp: PosFloat | None = Field(None, description="particles per pixel of the density sensor")
+    particles_per_microlens: PosFloat | None = Field(
+        None, description="particles per microlens of a plenoptic density sensor")
+    density_sensor: str | None = Field(
+        None, description="sensor id for ppp / particles_per_microlens (default: the first rendered sensor)")
+    diameter_um: PosFloat = Field(1.0, description="particle diameter (median of a log-normal) [um]")
+    distribution: Literal["monodisperse", "lognormal"] = Field("monodisperse", description="diameter distribution")
+    geometric_std: Annotated[float, Field(gt=1)] = Field(1.5, description="geometric standard deviation (lognormal)")
+    min_separation_mm: PosFloat | None = Field(None, description="minimum distance between particle centres [mm]")
+    proxy_radius_mm: PosFloat = Field(0.02, description="radius of the particles' proxy spheres in the scene [mm]")
+
+    @model_validator(mode="after")
+    def _one_density(self):
+        given = [k for k in ("count", "concentration_per_mm3") if getattr(self, k) is not None]
+        dens = [k for k in ("ppp", "particles_per_microlens") if getattr(self, k) is not None]
+        if len(given) + (1 if dens else 0) != 1:
+            raise ValueError("give exactly one of count, concentration_per_mm3, ppp or particles_per_microlens "
+                             "(ppp and particles_per_microlens may go together: the density sensor's kind picks); "
+                             f"got {given + dens or 'none'}")
+        if any(hi <= lo for lo, hi in zip(self.box_min_mm, self.box_max_mm, strict=True)):
+            raise ValueError(f"box_max_mm {list(self.box_max_mm)} must exceed box_min_mm {list(self.box_min_mm)} "
+                             "on every axis")
+        return self
+
+
+@cache
+def _flow_union():
+    from mitpiv.physics.flows import _KINDS
+
+    dt = (PosFloat, Field(..., description="time between the two frames [s]"))
+    models = {kind: model_from_signature(f"Flow_{kind}", cls, extra_fields={"dt_s": dt})
+              for kind, cls in _KINDS.items()}
+    return discriminated(models)
+
+
+class RenderTable(Table):
+    """Rendering settings."""
+
+    spp: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="samples per pixel (camera tracing) or passes (particle tracer); default the scene's")
+    sensors: Annotated[list[str], Field(min_length=1)] | None = Field(
+        None, description="ids of the scene's sensors to render (default all)")
+
+
+@cache
+def _sensor_table():
+    from mitpiv.imaging import SensorModel
+
+    base = model_from_signature("SensorTable", SensorModel, doc="The camera sensor model (mitpiv.imaging.SensorModel).")
+
+    class SensorTable(base):
+        @model_validator(mode="after")
+        def _physics(self):
+            SensorModel(**self.model_dump())  # its own range checks (ConfigError -> ValueError)
+            return self
+
+    SensorTable.__doc__ = base.__doc__
+    return SensorTable
+
+
+class ReconstructionTable(Table):
+    """Volume reconstruction (mitpiv.reconstruct.images.reconstruct_images)."""
+
+    method: Literal["mlos", "mart", "smart", "sapiv", "plenoptic", "drt-mart"] = Field(
+        "mart", description="reconstruction method")
+    bounds_mm: tuple[float, float, float, float, float, float] = Field(
+        ..., description="volume [xmin, xmax, ymin, ymax, zmin, zmax] [mm]")
+    voxel_mm: PosFloat | tuple[PosFloat, PosFloat, PosFloat] = Field(
+        ..., description="voxel size [mm]: one (cubic) or [dx, dy, dz]")
+    iterations: Annotated[int, Field(ge=1)] = Field(5, description="MART / SMART / DRT-MART iterations")
+    mu: Annotated[float, Field(gt=0, lt=2)] = Field(1.0, description="MART relaxation")
+    weights: Literal["circle", "gaussian"] = Field("circle", description="MART pixel-voxel weights")
+    interpolation: Literal["linear", "cubic"] = Field("linear", description="image interpolation")
+    preprocess: float | None = Field(None, description="histogram threshold: background + K sigma")
+    combine: Literal["additive", "multiplicative"] = Field("multiplicative", description="sapiv / plenoptic combination")
+    threshold_k: float | None = Field(3.0, description="sapiv: keep mean + k sigma per plane (none: no threshold)")
+    fuse_normalise: Literal["histogram", "max", "none"] = Field(
+        "histogram", description="plenoptic: normalisation before fusing cameras")
+    rays_per_pixel: Annotated[int, Field(ge=1)] = Field(16, description="drt-mart ray bundle per pixel")
+    camera_model: Literal["true", "undistorted"] = Field(
+        "true", description="'undistorted': the cameras' lens distortion left uncorrected")
+
+    @model_validator(mode="after")
+    def _bounds(self):
+        b = self.bounds_mm
+        if not (b[0] < b[1] and b[2] < b[3] and b[4] < b[5]):
+            raise ValueError(f"bounds_mm {list(b)} must be [xmin, xmax, ymin, ymax, zmin, zmax] with min < max")
+        return self
+
+
+Window = Annotated[int, Field(ge=4)] | tuple[Annotated[int, Field(ge=4)], Annotated[int, Field(ge=4)],
+                                             Annotated[int, Field(ge=4)]]
+
+
+class PivTable(Table):
+    """Multi-pass 3D PIV (mitpiv.analysis.piv3d)."""
+
+    windows: Annotated[list[Window], Field(min_length=1)] = Field(
+        [64, 48, 32], description="window edge per pass [voxels]: N or [wx, wy, wz]")
+    overlap: Annotated[float, Field(ge=0, lt=1)] = Field(0.75, description="window overlap fraction")
+    deform: bool = Field(True, description="window deformation (else integer window shifting)")
+    interpolation: Literal["linear", "cubic"] = Field("cubic", description="deformation resampling")
+    normalised: bool = Field(False, description="normalised cross-correlation")
+    threshold: PosFloat = Field(2.0, description="universal outlier detection threshold")
+    replace: Literal["median", "interpolation", "none"] = Field("median", description="outlier replacement")
+
+
+class ParticlesTable(Table):
+    """Particles found in the reconstructed volume and matched to the truth."""
+
+    method: Literal["gauss3", "centroid", "lsq"] = Field("gauss3", description="sub-voxel localisation")
+    threshold_rel: Annotated[float, Field(gt=0, lt=1)] = Field(0.1, description="peaks above this fraction of the max")
+    radius_voxels: PosFloat = Field(2.0, description="matching search radius [voxels]")
+
+
+@cache
+def schema():
+    """The tomo experiment model (built once: the flow and sensor tables come from the physics)."""
+    from pydantic import create_model
+
+    fields = {
+        "kind": (Literal["tomo"], Field("tomo", description="experiment kind")),
+        "name": (str, Field(..., description="experiment name (default: the file name)")),
+        "seed": (Annotated[int, Field(ge=0, lt=2**63)], Field(0, description="experiment seed (every random stream "
+                                                                              "derives from it)")),
+        "scene": (SceneTable, Field(..., description="the scene")),
+        "seeding": (SeedingTable, Field(..., description="particle seeding")),
+        "flow": (_flow_union(), Field(..., description="the flow (kind and its parameters) and dt_s")),
+        "render": (RenderTable, Field(default_factory=RenderTable, description="rendering")),
+        "sensor": (_sensor_table() | None, Field(None, description="sensor model (optional)")),
+        "reconstruction": (ReconstructionTable, Field(..., description="volume reconstruction")),
+        "piv": (PivTable, Field(default_factory=PivTable, description="3D PIV")),
+        "particles": (ParticlesTable, Field(default_factory=ParticlesTable, description="particle evaluation")),
+    }
+    model = create_model("TomoExperiment", __base__=Table,
+                         __doc__="A particle-image experiment: seeding, flow, render, reconstruction, "
+                                 "particles, 3D PIV.", **fields)
+    return model
+
+
+def prepare(raw: dict, base_dir: Path) -> dict:
+    """Resolve the scene XML against the experiment's folder (before validation)."""
+    scene = raw.get("scene")
+    if isinstance(scene, dict) and isinstance(scene.get("xml"), str):
+        xml = (base_dir / scene["xml"]).resolve()
+        if not xml.is_file():
+            raise ConfigError(f"experiment: [scene] xml = {scene['xml']!r} does not exist (resolved to {xml}).")
+        raw = {**raw, "scene": {**scene, "xml": str(xml)}}
+    if raw.get("kind") == "particles":
+        raw = {**raw, "kind": "tomo"}
+    return raw
+
+
+# ------------------------------------------------------------------------------- stages
+def grid_of(cfg):
+    from mitpiv.reconstruct import VoxelGrid
+
+    b = cfg.reconstruction.bounds_mm
+    return VoxelGrid.from_bounds((b[0], b[2], b[4]), (b[1], b[3], b[5]), cfg.reconstruction.voxel_mm)
+
+
+def _seeding_kwargs(s) -> dict:
+    kw = s.model_dump(exclude={"box_min_mm", "box_max_mm", "proxy_radius_mm", "density_sensor", "ppp",
+                               "particles_per_microlens"}, exclude_none=True)
+    return kw
+
+
+def stage_particles(ctx: StageContext) -> dict:
+    from mitpiv.io import write_particles_ply, write_truth
+    from mitpiv.physics.advection import advect
+    from mitpiv.physics.flows import flow_from_dict
+    from mitpiv.physics.seeding import seed_box
+
+    cfg, out = ctx.cfg, ctx.out
+    s = cfg.seeding
+    kw = _seeding_kwargs(s)
+    if s.ppp is not None or s.particles_per_microlens is not None:
+        kw["count"] = count_for_density(cfg, out)
+    particles = seed_box(s.box_min_mm, s.box_max_mm, seed=cfg.seed, **kw)
+    f = cfg.flow.model_dump()
+    dt = float(f.pop("dt_s"))
+    flow = flow_from_dict(f)
+    p1 = advect(particles.positions_mm, flow, dt_s=dt, t0_s=0.0, substeps=8)
+    for k, p in enumerate((particles.positions_mm, p1)):
+        write_particles_ply(out / f"particles_{k}.ply", p, particles.diameters_um, proxy_radius_mm=s.proxy_radius_mm)
+    write_truth(out / "truth.npz", positions_mm=[particles.positions_mm, p1], times_s=[0.0, dt],
+                diameters_um=particles.diameters_um, flow=flow.to_dict(), extra={"seed": cfg.seed})
+    # the scene reads particles_$frame.ply beside itself: the run gets its own copy of the XML
+    shutil.copy(cfg.scene.xml, out / "scene.xml")
+    return {"n_particles": len(particles)}
+
+
+def count_for_density(cfg, out: Path) -> int:
+    """Particle count for the target per-pixel (or per-microlens) density in one sensor."""
+    from mitpiv.io import camera_from_metadata, write_particles_ply
+    from mitpiv.physics.seeding import count_for_density as count
+    from mitpiv.render.render import sensor_model
+    from mitpiv.render.scene import load_scene
+
+    s = cfg.seeding
+    # the scene reads particles_$frame.ply beside itself: a one-particle placeholder to load it
+    xml = out / "scene.xml"
+    shutil.copy(cfg.scene.xml, xml)
+    centre = 0.5 * (np.asarray(s.box_min_mm, float) + np.asarray(s.box_max_mm, float))
+    for k in FRAMES:
+        write_particles_ply(out / f"particles_{k}.ply", centre[None], 1.0, proxy_radius_mm=0.01)
+    sc = load_scene(xml, frame=0, params=cfg.scene.params)
+    sensors = {(x.id() or f"sensor{i}"): x for i, x in enumerate(sc.sensors())}
+    wanted = s.density_sensor or (cfg.render.sensors or [next(iter(sensors))])[0]
+    if wanted not in sensors:
+        raise ConfigError(f"experiment: [seeding] density_sensor = {wanted!r} is not in the scene; its sensors are "
+                          f"{sorted(sensors)}.")
+    camera = camera_from_metadata({"camera": sensor_model(sensors[wanted])})
+    plenoptic = getattr(camera, "mla_count", None) is not None
+    ppp, ppm = s.ppp, s.particles_per_microlens
+    if ppp is not None and ppm is not None:  # both: the density sensor's kind picks
+        ppp, ppm = (None, ppm) if plenoptic else (ppp, None)
+    if ppm is not None and not plenoptic:
+        raise ConfigError(f"experiment: [seeding] particles_per_microlens needs a plenoptic density_sensor; "
+                          f"{wanted!r} is a {type(camera).__name__}. Use ppp for pinhole cameras.")
+    try:
+        return count(camera, s.box_min_mm, s.box_max_mm, ppp=ppp, particles_per_microlens=ppm, seed=cfg.seed)
+    except ConfigError as e:
+        raise ConfigError(f"experiment: [seeding] density sensor {wanted!r}: {e}") from None
+
+
+def stage_render(ctx: StageContext) -> dict:
+    from mitpiv.render.render import render_scene
+
+    cfg = ctx.cfg
+    files = render_scene(ctx.input("particles", "scene.xml"), out_dir=ctx.out, frames=FRAMES,
+                         params=cfg.scene.params, spp=cfg.render.spp, seed=cfg.seed, progress=ctx.progress,
+                         sensors=cfg.render.sensors)
+    return {"images": [f.name for f in files]}
+
+
+def images(run: Path, frame: int, source: str):
+    """The images of one frame from the ``render`` or ``sensor`` stage: (arrays, metadata, files)."""
+    from mitpiv.io import read_exr
+
+    files = sorted((run / source).glob(f"*_frame{frame:03d}.exr"))
+    if not files:
+        raise ConfigError(f"experiment: no images of frame {frame} in {run / source}.")
+    data = [read_exr(f) for f in files]
+    return [np.asarray(img if img.ndim == 2 else img[..., 0], dtype=np.float64) for img, _ in data], \
+        [m for _, m in data], files
+
+
+def stage_sensor(ctx: StageContext) -> dict:
+    from mitpiv.imaging import SensorModel, apply_sensor_set
+    from mitpiv.io import write_exr
+
+    cfg = ctx.cfg
+    model = SensorModel(**cfg.sensor.model_dump())
+    rendered, metas, names = {}, {}, {}
+    for frame in FRAMES:
+        imgs, ms, files = images(ctx.run_dir, frame, "render")
+        for img, meta, f in zip(imgs, ms, files, strict=True):
+            key = (meta.get("sensor_id") or f.stem.rsplit("_frame", 1)[0], frame)
+            rendered[key], metas[key], names[key] = img, meta, f.name
+    res = apply_sensor_set(rendered, model, seed=cfg.seed, progress=ctx.progress)
+    for key, c in res.counts.items():
+        write_exr(ctx.out / names[key], np.asarray(c, dtype=np.float32),
+                  {**metas[key], "sensor": model.to_dict(), **res.metadata(key)})
+    return {"exposure": res.exposure, "scene_peak": res.scene_peak, "noise_peak_counts": res.noise_peak_counts}
+
+
+def _undistorted(meta: dict) -> dict:
+    """The metadata of a pinhole camera with its lens distortion set to zero."""
+    cam = dict(meta.get("camera") or {})
+    if isinstance(cam.get("distortion"), dict):
+        cam["distortion"] = {k: (0.0 if isinstance(v, int | float) else v) for k, v in cam["distortion"].items()}
+    return {**meta, "camera": cam}
+
+
+def source_of(cfg) -> str:
+    return "sensor" if cfg.sensor is not None else "render"
+
+
+def stage_reconstruct(ctx: StageContext) -> dict:
+    from mitpiv.io import write_volume
+    from mitpiv.reconstruct.images import reconstruct_images
+
+    cfg = ctx.cfg
+    r = cfg.reconstruction
+    grid = grid_of(cfg)
+    info = {}
+    for frame in FRAMES:
+        imgs, metas, _ = images(ctx.run_dir, frame, source_of(cfg))
+        if r.camera_model == "undistorted":
+            metas = [_undistorted(m) for m in metas]
+        vol, inf = reconstruct_images(imgs, metas, grid, r.method, iterations=r.iterations, mu=r.mu,
+                                      weights=r.weights, interpolation=r.interpolation, preprocess=r.preprocess,
+                                      combine=r.combine, threshold_k=r.threshold_k,
+                                      fuse_normalise=r.fuse_normalise, rays_per_pixel=r.rays_per_pixel,
+                                      progress=ctx.progress)
+        if inf:
+            info[f"frame{frame}"] = {k: v for k, v in inf.items() if isinstance(v, int | float | str)}
+        write_volume(ctx.out / f"volume_{frame}.npz", vol, {"method": r.method, "grid": grid.to_dict()})
+    return info
+
+
+def volume(run: Path, frame: int):
+    from mitpiv.io import read_volume
+
+    return read_volume(run / "reconstruct" / f"volume_{frame}.npz")[0]
+
+
+def stage_evaluate(ctx: StageContext) -> dict:
+    from mitpiv import analysis
+    from mitpiv.io import read_truth
+    from mitpiv.io.matches import write_matches
+
+    cfg = ctx.cfg
+    p = cfg.particles
+    grid = grid_of(cfg)
+    truth = read_truth(ctx.input("particles", "truth.npz"))
+    metrics = {}
+    for frame in FRAMES:
+        metrics[f"frame{frame}"], res = analysis.evaluate_volume(
+            volume(ctx.run_dir, frame), grid, truth["positions_mm"][frame], method=p.method,
+            threshold_rel=p.threshold_rel, radius_voxels=p.radius_voxels)
+        write_matches(ctx.out / f"matches_{frame}.npz", res)
+    return metrics
+
+
+def stage_piv(ctx: StageContext) -> dict:
+    from mitpiv import analysis
+    from mitpiv.io import read_truth
+    from mitpiv.io.vectors import write_velocity_error
+    from mitpiv.physics.flows import flow_from_dict
+
+    cfg = ctx.cfg
+    grid = grid_of(cfg)
+    truth = read_truth(ctx.input("particles", "truth.npz"))
+    dt = float(truth["times_s"][1] - truth["times_s"][0])
+    pv = cfg.piv
+    field = analysis.piv3d(volume(ctx.run_dir, 0), volume(ctx.run_dir, 1), grid, windows=pv.windows,
+                           overlap=pv.overlap, deform=pv.deform, interpolation=pv.interpolation,
+                           normalised=pv.normalised, threshold=pv.threshold,
+                           replace=None if pv.replace == "none" else pv.replace, dt_s=dt, progress=ctx.progress)
+    res = analysis.velocity_error(field, flow_from_dict(truth["flow"]))
+    metrics = analysis.velocity_error_summary(res)
+    field.info["velocity_error"] = metrics
+    field.save(ctx.out / "field.npz")
+    write_velocity_error(ctx.out / "velocity_error.npz", res)
+    return metrics
+
+
+def stage_report(ctx: StageContext) -> dict:
+    from mitpiv.studies import report
+
+    return report.write(report.tomo_report(ctx.cfg, ctx.run_dir, ctx.results, ctx.timings), ctx.out)
+
+
+def stages(cfg) -> list[Stage]:
+    out = [Stage("particles", ("seed", "seeding", "flow", "scene"), stage_particles),
+           Stage("render", ("scene", "render"), stage_render)]
+    if cfg.sensor is not None:
+        out.append(Stage("sensor", ("sensor",), stage_sensor))
+    out += [Stage("reconstruct", ("reconstruction",), stage_reconstruct),
+            Stage("evaluate", ("particles",), stage_evaluate),
+            Stage("piv", ("piv",), stage_piv),
+            Stage("report", (), stage_report)]
+    return out
+
+
+def summary(cfg, results: dict) -> dict:
+    """metrics.json of a tomo run: Q, particles per frame (``evaluate``), PIV errors (``piv``)."""
+    return {"name": cfg.name, "seed": cfg.seed, "kind": "tomo", "evaluate": results.get("evaluate"),
+            "piv": results.get("piv"), "n_particles": (results.get("particles") or {}).get("n_particles")}
+
+
+def row(metrics: dict) -> dict:
+    """The sweep-table columns of a tomo run: frame0.*, frame1.*, piv.*, n_particles."""
+    from mitpiv.studies.sweep import flatten
+
+    ev = metrics.get("evaluate") or {}
+    out = {}
+    flatten("", {"frame0": ev.get("frame0"), "frame1": ev.get("frame1"), "piv": metrics.get("piv"),
+                 "n_particles": metrics.get("n_particles")}, out)
+    return out
+
+
+def headline(m: dict) -> str:
+    ev = (m.get("evaluate") or {}).get("frame0", {})
+    pv = m.get("piv") or {}
+    return (f"{m['name']}: Q {ev.get('Q', float('nan')):.3f}, particles detected "
+            f"{100 * ev.get('particles', {}).get('detection_rate', float('nan')):.1f} %, PIV RMS error "
+            f"{', '.join(f'{x:.4f}' for x in pv.get('rms_vox', []))} voxels")
+
+
+KIND = Kind(name="tomo", build_schema=schema, stages=stages, summary=summary, row=row, aliases=("particles",),
+            prepare=prepare, headline=headline, describe="particle images, reconstruction, particles and 3D PIV")

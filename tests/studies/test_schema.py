@@ -1,0 +1,170 @@
+"""The typed experiment schema: every key of every table of every scene's experiment file,
+mistyped, gives one error that names the table, the key and the nearest valid name; every
+mistyped value names the table, the key, the value and the valid choices or range; all of
+it before any stage runs. The schema reference, --set values and the CLI flags come from
+the same models."""
+
+import shutil
+import tomllib
+import typing
+from pathlib import Path
+
+import pytest
+
+from mitpiv.errors import ConfigError
+from mitpiv.studies import load_experiment
+from mitpiv.studies.kinds import get_kind
+from mitpiv.studies.schema import describe, parse_value
+
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+EXPERIMENTS = sorted(SCENES.glob("*/experiment.toml"))
+
+
+def _tables(path):
+    raw = tomllib.loads(path.read_text())
+    return [(t, k, v) for t, tab in raw.items() if isinstance(tab, dict) for k, v in tab.items()]
+
+
+@pytest.mark.parametrize("path", EXPERIMENTS, ids=lambda p: p.parent.name)
+def test_every_mistyped_key_is_named_with_the_nearest_valid_one(path, tmp_path, monkeypatch):
+    # nothing may render or write while the experiment is checked
+    monkeypatch.setattr("mitpiv.studies.runner.run_stages", lambda *a, **k: pytest.fail("a stage ran"))
+    for table, key, value in _tables(path):
+        if table == "scene" and key == "params":
+            continue  # free-form $name substitutions of the scene XML
+        raw = path.read_text()
+        typo = key[:-1] if len(key) > 3 else key + "x"
+        with pytest.raises(ConfigError) as e:
+            load_experiment(_renamed(path, table, key, typo, tmp_path))
+        msg = str(e.value)
+        assert f"[{table}] {typo}: unknown key" in msg, msg
+        assert f"Did you mean '{key}'" in msg, msg
+        assert raw == path.read_text()
+
+
+def _renamed(path, table, key, typo, tmp_path):
+    """A copy of the experiment (beside the original, so relative paths hold) with
+    ``table.key`` renamed ``table.typo``, as a user's typo would."""
+    lines, section = [], None
+    for line in path.read_text().splitlines():
+        s = line.strip()
+        if s.startswith("[") and s.endswith("]"):
+            section = s.strip("[]").strip()
+        if section == table and s.split("=")[0].strip() == key:
+            line = line.replace(key, typo, 1)
+        lines.append(line)
+    folder = tmp_path / path.parent.name
+    if not folder.exists():
+        shutil.copytree(path.parent, folder, ignore=shutil.ignore_patterns("*.ply", "*.npz", "*.csv"))
+    out = folder / "experiment.toml"
+    out.write_text("\n".join(lines) + "\n")
+    return out
+
+
+@pytest.mark.parametrize("path", EXPERIMENTS, ids=lambda p: p.parent.name)
+def test_every_bad_value_names_table_key_value_and_choices(path):
+    kind = get_kind(tomllib.loads(path.read_text()).get("kind", "tomo"))
+    model = kind.schema
+    checked = 0
+    for table, key, value in _tables(path):
+        if table == "scene" or (table in ("flow", "field") and key == "kind"):
+            continue
+        ann = _field_annotation(model, table, key, tomllib.loads(path.read_text())[table])
+        if typing.get_origin(ann) is typing.Literal:
+            bad, want = "nonsense", [repr(c) for c in typing.get_args(ann)]
+        elif isinstance(value, bool):
+            bad, want = "maybe", []
+        elif isinstance(value, int | float):
+            bad, want = "abc", []
+        else:
+            continue
+        with pytest.raises(ConfigError) as e:
+            load_experiment(path, {f"{table}.{key}": bad})
+        msg = str(e.value)
+        assert f"[{table}] {key}" in msg and repr(bad) in msg, msg
+        assert all(w in msg for w in want), msg
+        checked += 1
+    assert checked >= 4
+    # flow / field kinds: the valid kinds are listed
+    for table in ("flow", "field"):
+        if table in tomllib.loads(path.read_text()):
+            with pytest.raises(ConfigError, match=rf"{table}: 'vortexring' is not a valid choice; choose one of"):
+                load_experiment(path, {f"{table}.kind": "vortexring"})
+
+
+def _field_annotation(model, table, key, raw_table):
+    from mitpiv.studies.schema import _models_in
+
+    members = _models_in(model.model_fields[table].annotation)
+    for m in members:
+        kf = m.model_fields.get("kind")
+        if kf is None or raw_table.get("kind") in typing.get_args(kf.annotation):
+            ann = m.model_fields[key].annotation
+            while typing.get_origin(ann) is typing.Union and type(None) in typing.get_args(ann):
+                ann = [a for a in typing.get_args(ann) if a is not type(None)][0]
+            return ann
+    raise AssertionError(f"no model for [{table}]")
+
+
+def test_method_choices_are_the_reconstruction_entry_points():
+    from mitpiv.reconstruct.images import RECONSTRUCT_METHODS
+    from mitpiv.studies.kinds.tomo import ReconstructionTable
+
+    assert typing.get_args(ReconstructionTable.model_fields["method"].annotation) == RECONSTRUCT_METHODS
+
+
+def test_flow_tables_follow_the_flow_classes():
+    """The [flow] keys are the flow constructors' own parameters (plus dt_s): a table and
+    the physics it configures cannot drift apart."""
+    import inspect
+
+    from mitpiv.physics.flows import _KINDS
+    from mitpiv.studies.kinds.tomo import schema
+    from mitpiv.studies.schema import _models_in
+
+    members = {typing.get_args(m.model_fields["kind"].annotation)[0]: m
+               for m in _models_in(schema().model_fields["flow"].annotation)}
+    assert set(members) == set(_KINDS)
+    for kind, cls in _KINDS.items():
+        params = set(inspect.signature(cls).parameters)
+        assert set(members[kind].model_fields) == params | {"kind", "dt_s"}
+
+
+def test_models_are_frozen_and_defaults_filled():
+    cfg = load_experiment(SCENES / "tomo4" / "experiment.toml")
+    assert cfg.piv.deform is True and cfg.particles.radius_voxels == 2.0 and cfg.sensor is None
+    with pytest.raises(Exception, match="frozen"):
+        cfg.piv.overlap = 0.5  # type: ignore[misc]
+
+
+def test_schema_reference_lists_every_table_and_field(capsys):
+    from mitpiv.cli import main
+
+    for kind in ("tomo", "backlit"):
+        model = get_kind(kind).schema
+        text = describe(model)
+        for name in model.model_fields:
+            assert f"`{name}`" in text or f"[{name}]" in text, name
+        assert main(["schema", "--kind", kind]) == 0
+        out = capsys.readouterr().out
+        assert "| key | type | default | range | meaning |" in out
+    out = describe(get_kind("tomo").schema)
+    assert "`voxel_mm`" in out and "> 0" in out and "## [flow] kind = 'vortex_ring'" in out
+    assert main(["schema", "--kind", "holo"]) == 2
+
+
+@pytest.mark.parametrize("text, value", [("5", 5), ("0.1", 0.1), ("[48, 32]", [48, 32]), ("true", True),
+                                         ("smart", "smart"), ('"a b"', "a b"), ("[[64, 64, 32]]", [[64, 64, 32]])])
+def test_set_values_are_toml(text, value):
+    assert parse_value(text) == value
+
+
+def test_old_kind_name_and_unknown_kind(tmp_path):
+    p = tmp_path / "e.toml"
+    p.write_text((SCENES / "tomo4" / "experiment.toml").read_text().replace('name = "tomo4"',
+                                                                            'name = "t"\nkind = "particles"'))
+    p2 = tmp_path / "scene.xml"
+    p2.write_text((SCENES / "tomo4" / "scene.xml").read_text())
+    assert load_experiment(p).kind == "tomo"
+    with pytest.raises(ConfigError, match="not a known experiment kind.*tomo.*backlit"):
+        load_experiment(p, {"kind": "holography"})
