@@ -16,7 +16,7 @@ from mitpiv.reconstruct.calibration import (
     label_markers,
     plane_homographies,
 )
-from mitpiv.reconstruct.grid import VoxelGrid
+from mitpiv.grid import VoxelGrid
 from mitpiv.reconstruct.mapping import CameraMapping, PinholeMapping, PolynomialMapping, mapping_from_metadata
 
 __all__ = [
