@@ -27,6 +27,9 @@ def focal_plane_distance(*, focal_length_mm: float, magnification: float) -> flo
 def alpha_from_z(z_mm, *, focal_length_mm: float, magnification: float):
     """Refocus parameter ``alpha = s_i'/s_i`` of the plane ``z_mm`` beyond the focal plane.
 
+    The formula is :func:`mitpiv.physics.plenoptic.alpha_from_z_geom` with the focal plane at
+    :func:`focal_plane_distance`; a scalar ``z_mm`` gives a float.
+
     Parameters
     ----------
     z_mm : float or array
@@ -35,9 +38,6 @@ def alpha_from_z(z_mm, *, focal_length_mm: float, magnification: float):
         Main-lens focal length.
     magnification : float
         Lateral magnification of the focal plane (its sign is ignored).
-
-    The formula is :func:`mitpiv.physics.plenoptic.alpha_from_z_geom` (focal plane at
-    :func:`focal_plane_distance`); a scalar ``z_mm`` gives a float.
     """
     so = focal_plane_distance(focal_length_mm=focal_length_mm, magnification=magnification)
     out = alpha_from_z_geom(z_mm, float(focal_length_mm), so)

@@ -20,8 +20,9 @@ The camera contract
 :class:`Camera` writes down the one interface every camera model offers (the pinhole
 here, distorted or not, thin lens or not, and :class:`~mitpiv.physics.plenoptic.PlenopticCamera`):
 ``project``, ``in_front``, ``visible``, ``jacobian``, ``resolution``, ``to_dict`` /
-``from_dict``. Reconstruction, calibration, seeding-density targets and the studies use
-only this contract.
+``from_dict``. The reconstruction mappings, the seeding-density targets
+(:func:`mitpiv.physics.seeding.count_for_density`) and :func:`mitpiv.io.camera_from_metadata`
+are written against it, not against one camera class.
 """
 
 from __future__ import annotations
