@@ -220,7 +220,7 @@ def hybrid_detect(stack, z_mm, *, background=None, threshold: float = 0.5, min_a
     """
     from scipy import ndimage
 
-    from mitpiv.analysis.particles import _gauss3
+    from mitpiv.analysis.particles import gauss3_offset as _gauss3
 
     st = np.asarray(stack, dtype=np.float64)
     z = np.asarray(z_mm, dtype=np.float64).reshape(-1)

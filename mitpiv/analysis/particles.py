@@ -44,9 +44,12 @@ class FoundParticles:
         return int(self.positions_mm.shape[0])
 
 
-def _gauss3(l, c, r):
+def gauss3_offset(l, c, r):
     """Sub-voxel offset of the maximum of three samples: 3-point Gaussian, parabolic
-    fallback where any sample is <= 0 (the logarithm does not exist), 0 for a flat top."""
+    fallback where any sample is <= 0 (the logarithm does not exist), 0 for a flat top.
+
+    ``l, c, r``: arrays (broadcast together) of the samples at -1, 0, +1; returns the
+    offset of the peak from the centre sample, clipped to [-1, 1] [samples]."""
     l, c, r = (np.asarray(a, dtype=np.float64) for a in (l, c, r))
     pos = (l > 0) & (c > 0) & (r > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -56,6 +59,9 @@ def _gauss3(l, c, r):
         off_g = np.where(den_g < 0, (ll - lr) / np.where(den_g < 0, den_g, 1.0), 0.0)
         off_p = np.where(den_p < 0, (l - r) / np.where(den_p < 0, den_p, 1.0), 0.0)
     return np.clip(np.where(pos, off_g, off_p), -1.0, 1.0)
+
+
+_gauss3 = gauss3_offset  # deprecated private name
 
 
 def _windows(volume, idx_zyx, h):
@@ -190,9 +196,9 @@ def find_particles(volume, grid, *, threshold: float | None = None, threshold_re
     h = 1
     win = _windows(v, seed, h)
     c = win[:, 1, 1, 1]
-    g3 = np.column_stack([_gauss3(win[:, 1, 1, 0], c, win[:, 1, 1, 2]),
-                          _gauss3(win[:, 1, 0, 1], c, win[:, 1, 2, 1]),
-                          _gauss3(win[:, 0, 1, 1], c, win[:, 2, 1, 1])])
+    g3 = np.column_stack([gauss3_offset(win[:, 1, 1, 0], c, win[:, 1, 1, 2]),
+                          gauss3_offset(win[:, 1, 0, 1], c, win[:, 1, 2, 1]),
+                          gauss3_offset(win[:, 0, 1, 1], c, win[:, 2, 1, 1])])
     if method == "gauss3":
         off = g3
     elif method == "centroid":

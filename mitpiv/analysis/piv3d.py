@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mitpiv.analysis.particles import _gauss3
+from mitpiv.analysis.particles import gauss3_offset as _gauss3
 from mitpiv.errors import ConfigError, FileFormatError, check_positive
 
 REPLACE_METHODS = ("median", "interpolation")

@@ -24,7 +24,7 @@ from scipy.special import erf
 from scipy.stats import rankdata
 
 from mitpiv.errors import ConfigError
-from mitpiv.reconstruct.grid import VoxelGrid
+from mitpiv.grid import VoxelGrid
 
 __all__ = ["quality_q", "quality_q_zero_mean", "rank_correlation", "plane_snr", "truth_volume"]
 

@@ -27,7 +27,7 @@ def write_volume(path, volume, meta: dict) -> Path:
 
 def read_volume(path):
     """(volume, VoxelGrid, meta) from a file written by :func:`write_volume`."""
-    from mitpiv.reconstruct.grid import VoxelGrid
+    from mitpiv.grid import VoxelGrid
 
     path = Path(path)
     if not path.is_file():

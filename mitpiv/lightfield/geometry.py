@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
-from mitpiv.physics.plenoptic import _dof_limits, depth_resolution_geom, thin_lens_image_distance
+from mitpiv.physics.plenoptic import alpha_from_z_geom, depth_resolution_geom, dof_limits_geom
 
 __all__ = ["alpha_from_z", "z_from_alpha", "depth_resolution", "depth_of_field", "focal_plane_distance"]
 
@@ -27,6 +27,9 @@ def focal_plane_distance(*, focal_length_mm: float, magnification: float) -> flo
 def alpha_from_z(z_mm, *, focal_length_mm: float, magnification: float):
     """Refocus parameter ``alpha = s_i'/s_i`` of the plane ``z_mm`` beyond the focal plane.
 
+    The formula is :func:`mitpiv.physics.plenoptic.alpha_from_z_geom` with the focal plane at
+    :func:`focal_plane_distance`; a scalar ``z_mm`` gives a float.
+
     Parameters
     ----------
     z_mm : float or array
@@ -37,14 +40,7 @@ def alpha_from_z(z_mm, *, focal_length_mm: float, magnification: float):
         Lateral magnification of the focal plane (its sign is ignored).
     """
     so = focal_plane_distance(focal_length_mm=focal_length_mm, magnification=magnification)
-    f = float(focal_length_mm)
-    z = np.asarray(z_mm, dtype=float)
-    if np.any(~np.isfinite(z)) or np.any(so + z <= f * (1 + 1e-9)):
-        raise ConfigError(
-            f"alpha_from_z: every z must be finite and > {f - so:.6g} mm (the object must stay beyond the focal "
-            f"length, {f} mm from the lens; the focal plane is at {so:.6g} mm); got min z = {np.nanmin(z):.6g}."
-        )
-    out = thin_lens_image_distance(f, so + z) / thin_lens_image_distance(f, so)
+    out = alpha_from_z_geom(z_mm, float(focal_length_mm), so)
     return float(out) if out.ndim == 0 else out
 
 
@@ -74,7 +70,7 @@ def depth_of_field(*, focal_length_mm: float, magnification: float, f_number: fl
     d = f / check_positive("f_number", f_number, owner="depth_of_field")
     nu = check_positive("angular_samples", angular_samples, owner="depth_of_field")
     p = check_positive("mla_pitch_um", mla_pitch_um, owner="depth_of_field", unit="um") * 1e-3
-    return _dof_limits(f, so, d / nu, p)
+    return dof_limits_geom(f, so, d / nu, p)
 
 
 def depth_resolution(*, focal_length_mm: float, magnification: float, f_number: float, mla_pitch_um: float,

@@ -33,7 +33,7 @@ from mitpiv.io.atomic import atomic_path
 from mitpiv.lightfield.decode import LightField
 from mitpiv.lightfield.geometry import alpha_from_z, z_from_alpha
 
-__all__ = ["refocus", "focal_stack", "refocus_volume", "METHODS"]
+__all__ = ["refocus", "focal_stack", "refocus_volume", "grid_steps", "METHODS"]
 
 METHODS = ("additive", "multiplicative")
 _MAX_IN_MEMORY = 2 * 1024**3  # bytes: larger stacks must stream to a file
@@ -186,18 +186,23 @@ def _wmin(w, fraction) -> float:
     return float(fraction * w.sum() * (1 - 1e-9))
 
 
-def _grid_steps(lf: LightField) -> tuple[float, float]:
-    """Spacing [px] of the spatial grid along s and t."""
+def grid_steps(lf: LightField) -> tuple[float, float]:
+    """Spacing ``(ds, dt)`` [sensor px] of a light field's spatial grid along s and t (1 where
+    an axis has one sample): refocused-image index ``(i, j)`` sits at sensor pixel
+    ``(lf.s_px[0] + i ds, lf.t_px[0] + j dt)``."""
     ds = lf.s_px[1] - lf.s_px[0] if len(lf.s_px) > 1 else 1.0
     dt = lf.t_px[1] - lf.t_px[0] if len(lf.t_px) > 1 else 1.0
     return ds, dt
+
+
+_grid_steps = grid_steps  # deprecated private name
 
 
 def _plane_geometry(lf: LightField, alpha: float, magnification: str, z_mm: float | None):
     """Grid-unit positions (base_s, base_t) and per-view shifts (sh_u, sh_v) of one plane."""
     if not (np.isfinite(alpha) and alpha > 0):
         raise ConfigError(f"refocus: 'alpha' must be finite and > 0, got {alpha!r}.")
-    ds, dt = _grid_steps(lf)
+    ds, dt = grid_steps(lf)
     gamma = 1.0 - 1.0 / alpha
     kappa = 1.0
     if magnification == "constant":
@@ -314,7 +319,7 @@ def refocus_volume(lf: LightField, x_mm, y_mm, z_mm, *, method: str = "additive"
     xs, ys, zs = (np.atleast_1d(np.asarray(a, dtype=np.float64)) for a in (x_mm, y_mm, z_mm))
     w = _weights(lf, weights)
     shape = (len(zs), len(ys), len(xs))
-    ds, dt = _grid_steps(lf)
+    ds, dt = grid_steps(lf)
     pp = o.pixel_pitch_um * 1e-3
     si, f = o.image_distance_mm, o.focal_length_mm
     a = lf.aperture_mm

@@ -12,19 +12,33 @@ Mitsuba's camera frame has x left, y up, z forward; :meth:`PinholeCamera.to_worl
 returns the matrix a Mitsuba sensor needs.
 
 This model is the contract between rendering and reconstruction: the EXR metadata
-stores :meth:`PinholeCamera.to_dict`, and :meth:`PinholeCamera.from_dict` restores it.
+stores :meth:`PinholeCamera.to_dict`, and :meth:`PinholeCamera.from_dict` restores it
+(:func:`mitpiv.io.camera_from_metadata` builds any camera from an image's metadata).
+
+The camera contract
+-------------------
+:class:`Camera` writes down the one interface every camera model offers (the pinhole
+here, distorted or not, thin lens or not, and :class:`~mitpiv.physics.plenoptic.PlenopticCamera`):
+``project``, ``in_front``, ``visible``, ``jacobian``, ``resolution``, ``to_dict`` /
+``from_dict``. The reconstruction mappings, the seeding-density targets
+(:func:`mitpiv.physics.seeding.count_for_density`) and :func:`mitpiv.io.camera_from_metadata`
+are written against it, not against one camera class.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
-from mitpiv.physics.distortion import Distortion, check_distortion, distort, undistort
+from mitpiv.physics.distortion import Distortion, check_distortion, distort, distort_jacobian, undistort
 
 __all__ = [
+    "Camera",
+    "CV_TO_MITSUBA",
+    "on_sensor",
     "PinholeCamera",
     "look_at_rotation",
     "place_camera",
@@ -34,8 +48,68 @@ __all__ = [
     "scheimpflug",
 ]
 
-# OpenCV camera frame -> Mitsuba camera frame (x and y flip).
-_CV_TO_MI = np.diag([-1.0, -1.0, 1.0])
+#: OpenCV camera frame -> Mitsuba camera frame (x and y flip): a Mitsuba camera-to-world
+#: rotation is ``R.T @ CV_TO_MITSUBA`` for the world-to-camera (OpenCV) rotation ``R``.
+CV_TO_MITSUBA = np.diag([-1.0, -1.0, 1.0])
+CV_TO_MITSUBA.flags.writeable = False
+_CV_TO_MI = CV_TO_MITSUBA  # deprecated private name
+
+
+@runtime_checkable
+class Camera(Protocol):
+    """The camera contract: what every camera model offers (pinhole, distorted, thin lens,
+    plenoptic). Structural: a class satisfies it by having these members, no inheritance.
+
+    Pixel coordinates ``(u, v)`` are continuous: pixel ``(i, j)`` spans ``[i, i+1) x [j, j+1)``
+    (centre at ``i + 0.5``), ``u`` along image columns, ``v`` along rows; the sensor is
+    ``[0, W) x [0, H)``.
+
+    Attributes
+    ----------
+    resolution : (int, int)
+        Sensor width and height ``(W, H)`` [px].
+
+    Methods
+    -------
+    project(p_world_mm) -> (..., 2)
+        Pixel coordinates of world points (..., 3) [mm]: the image of the point's chief
+        ray (for a thin lens the centre of its blur spot; for a plenoptic camera the chief
+        ray through the main-lens centre onto the microlens plane, scaled to the sensor).
+        Defined (finite) for points in front of the camera; points behind it may project
+        anywhere (mirrored), so combine with ``in_front`` or use ``visible``.
+    in_front(p_world_mm) -> (...) bool
+        The point lies in front of the camera's projection centre (depth > 0).
+    visible(p_world_mm) -> (...) bool
+        ``in_front`` and ``project`` lands on the sensor ``[0, W) x [0, H)``.
+    jacobian(p_world_mm) -> (..., 2, 3)
+        ``d(u, v) / d(x, y, z)`` [px/mm] of ``project``.
+    to_dict() -> dict, from_dict(d) -> Camera
+        JSON-ready description (units in the key names, ``"model"`` naming the model) and
+        its exact inverse: ``from_dict(c.to_dict())`` projects like ``c``.
+    """
+
+    resolution: tuple[int, int]
+
+    def project(self, p_world_mm) -> np.ndarray: ...
+
+    def in_front(self, p_world_mm) -> np.ndarray: ...
+
+    def visible(self, p_world_mm) -> np.ndarray: ...
+
+    def jacobian(self, p_world_mm) -> np.ndarray: ...
+
+    def to_dict(self) -> dict: ...
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Camera: ...
+
+
+def on_sensor(uv_px, resolution) -> np.ndarray:
+    """Whether pixel coordinates (..., 2) lie on a sensor of ``resolution = (W, H)``:
+    ``0 <= u < W`` and ``0 <= v < H`` (NaN is off the sensor)."""
+    uv = np.asarray(uv_px, dtype=float)
+    w, h = resolution
+    return (uv[..., 0] >= 0) & (uv[..., 0] < w) & (uv[..., 1] >= 0) & (uv[..., 1] < h)
 
 
 @dataclass
@@ -136,19 +210,47 @@ class PinholeCamera:
         p = np.asarray(p_world, dtype=float)
         return (p - self.position_mm) @ self.rotation.T
 
-    def project(self, p_world) -> np.ndarray:
+    def project(self, p_world_mm) -> np.ndarray:
         """Project world points [mm], shape (..., 3), to pixel coordinates (..., 2).
 
         For a thin-lens camera this is the image of the chief ray (the centre of the
-        defocus blur).
+        defocus blur). A point behind the pinhole projects mirrored (see :meth:`visible`).
         """
-        pc = self.world_to_camera(p_world)
-        x = pc[..., 0] / pc[..., 2]
-        y = pc[..., 1] / pc[..., 2]
+        pc = self.world_to_camera(p_world_mm)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = pc[..., 0] / pc[..., 2]
+            y = pc[..., 1] / pc[..., 2]
         xd, yd = distort(x, y, self.distortion)
         cx, cy = self.principal_point_px
         f = self.focal_px
         return np.stack([f * xd + cx, f * yd + cy], axis=-1)
+
+    def in_front(self, p_world_mm) -> np.ndarray:
+        """Points (..., 3) [mm] in front of the pinhole (camera-frame z > 0), shape (...)."""
+        return self.world_to_camera(p_world_mm)[..., 2] > 0
+
+    def visible(self, p_world_mm) -> np.ndarray:
+        """Points (..., 3) [mm] in front of the pinhole whose projection lands on the sensor
+        ``[0, W) x [0, H)``, shape (...). (A point behind the pinhole projects mirrored,
+        possibly onto the sensor: reconstructions must leave it out.)"""
+        with np.errstate(invalid="ignore", over="ignore"):
+            return self.in_front(p_world_mm) & on_sensor(self.project(p_world_mm), self.resolution)
+
+    def jacobian(self, p_world_mm) -> np.ndarray:
+        """``d(u, v)/d(x, y, z)`` of :meth:`project`, shape (..., 2, 3) [px/mm] (analytic:
+        pinhole division, Brown-Conrady Jacobian, rotation)."""
+        pc = self.world_to_camera(p_world_mm)
+        z = pc[..., 2]
+        x, y = pc[..., 0] / z, pc[..., 1] / z
+        _, _, a, b, c, e = distort_jacobian(x, y, self.distortion)
+        # d(x, y)/d(p_camera)
+        dn = np.zeros(pc.shape[:-1] + (2, 3))
+        dn[..., 0, 0] = 1 / z
+        dn[..., 0, 2] = -x / z
+        dn[..., 1, 1] = 1 / z
+        dn[..., 1, 2] = -y / z
+        dd = np.stack([np.stack([a, b], -1), np.stack([c, e], -1)], -2) * self.focal_px
+        return dd @ dn @ self.rotation
 
     def pixel_to_ray(self, uv_px, *, iterations: int = 20):
         """Chief rays through pixel positions: (origin (3,), directions (..., 3)) in world."""
@@ -164,7 +266,7 @@ class PinholeCamera:
     def to_world_mitsuba(self) -> np.ndarray:
         """4x4 camera-to-world matrix in Mitsuba's camera convention (x left, y up)."""
         m = np.eye(4)
-        m[:3, :3] = self.rotation.T @ _CV_TO_MI
+        m[:3, :3] = self.rotation.T @ CV_TO_MITSUBA
         m[:3, 3] = self.position_mm
         return m
 
@@ -184,7 +286,7 @@ class PinholeCamera:
         r_cw_mi = u @ vt
         if np.linalg.det(r_cw_mi) < 0:
             raise ConfigError("camera: to_world must not mirror the scene (negative determinant).")
-        rotation = (r_cw_mi @ _CV_TO_MI).T
+        rotation = (r_cw_mi @ CV_TO_MITSUBA).T
         return rotation, m[:3, 3].copy()
 
     # ------------------------------------------------------------------ metadata

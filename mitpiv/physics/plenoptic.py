@@ -24,6 +24,13 @@ lenslet centre from the main-lens centre, not on the lenslet centres themselves;
 at ``C_k + u`` looks through lenslet ``k`` at the main-lens aperture point
 ``a = -u s_i / g`` (the basis of :mod:`mitpiv.lightfield`).
 
+The camera satisfies the camera contract (:class:`mitpiv.physics.camera.Camera`):
+:meth:`PlenopticCamera.project` is the image point of a world point, the chief ray
+through the main-lens centre onto the MLA plane, ``X = -s_i (x, y) / z`` (local frame),
+scaled to the sensor by ``1 + g/s_i`` like the lenslet-image centres. It is the pinhole
+projection of a camera with focal length ``s_i + g`` at the main-lens centre: the pixel
+(on the lenslet-image lattice) round which a point's light gathers, whatever its depth.
+
 Design calculators (depth of field, depth resolution, pixel bookkeeping) follow the
 geometric construction of Deem et al. (2016, Meas. Sci. Technol. 27 084003): a point is
 in focus in a refocused image while its blur spot on the MLA plane stays within one
@@ -39,8 +46,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
+from mitpiv.physics.camera import on_sensor
 
-__all__ = ["PlenopticCamera", "PRESETS", "preset", "thin_lens_image_distance"]
+__all__ = ["PlenopticCamera", "PRESETS", "preset", "thin_lens_image_distance", "alpha_from_z_geom", "dof_limits_geom",
+           "depth_resolution_geom"]
 
 _OWNER = "plenoptic"
 
@@ -209,6 +218,11 @@ class PlenopticCamera:
         return self.mla_focal_length_um / self.mla_pitch_um
 
     @property
+    def n_lenslets(self) -> int:
+        """Number of lenslets in the array (``mla_count[0] * mla_count[1]``)."""
+        return int(self.mla_count[0]) * int(self.mla_count[1])
+
+    @property
     def pmr(self) -> float:
         """Pixels per lenslet pitch (may be non-integer)."""
         return self.mla_pitch_um / self.pixel_pitch_um
@@ -356,8 +370,8 @@ class PlenopticCamera:
         if kind not in ("refocused", "perspective"):
             raise ConfigError(f"depth_of_field: 'kind' must be 'refocused' or 'perspective', got {kind!r}.")
         nu = max(self.angular_samples, 1.0) if kind == "perspective" else 1.0
-        return _dof_limits(self.focal_length_mm, self.focus_distance_mm, self.aperture_diameter_mm / nu,
-                           self.mla_pitch_um * 1e-3)
+        return dof_limits_geom(self.focal_length_mm, self.focus_distance_mm, self.aperture_diameter_mm / nu,
+                               self.mla_pitch_um * 1e-3)
 
     def depth_resolution(self) -> float:
         """Smallest depth step [mm] between distinguishable refocus planes at the focal plane:
@@ -501,6 +515,52 @@ class PlenopticCamera:
         m = self.to_world_mitsuba
         return (np.asarray(p_world, dtype=float) - m[:3, 3]) @ m[:3, :3]
 
+    # ------------------------------------------------------------------ camera contract
+    @property
+    def chief_ray_scale_px(self) -> float:
+        """``(s_i + g) / p_px``: pixels per unit of ``-(x, y)/z`` on the sensor (the focal
+        length, in pixels, of the equivalent pinhole of :meth:`project`)."""
+        return self.image_distance_mm * self.image_scale / (self.pixel_pitch_um * 1e-3)
+
+    def project(self, p_world_mm) -> np.ndarray:
+        """Image point of world points (..., 3) [mm] in pixel coordinates (..., 2).
+
+        The chief ray through the main-lens centre meets the MLA plane at
+        ``X = -s_i (x, y) / z`` (camera-local Mitsuba frame); scaled by ``1 + g/s_i``, as the
+        lenslet-image centres are, it gives the sensor point ``(s_i + g) (-(x, y) / z)``
+        round which the point's light gathers on the lenslet-image lattice (the point's
+        image in a refocused or sub-aperture view). A point behind the lens projects
+        mirrored (see :meth:`visible`).
+        """
+        q = self.world_to_local(p_world_mm)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -q[..., :2] / q[..., 2:3]
+        w, h = self.resolution
+        return t * self.chief_ray_scale_px + np.array([w / 2.0, h / 2.0])
+
+    def in_front(self, p_world_mm) -> np.ndarray:
+        """Points (..., 3) [mm] in front of the main lens (local z > 0), shape (...)."""
+        return self.world_to_local(p_world_mm)[..., 2] > 0
+
+    def visible(self, p_world_mm) -> np.ndarray:
+        """Points (..., 3) [mm] in front of the main lens whose image point
+        (:meth:`project`) lands on the sensor ``[0, W) x [0, H)``, shape (...)."""
+        with np.errstate(invalid="ignore", over="ignore"):
+            return self.in_front(p_world_mm) & on_sensor(self.project(p_world_mm), self.resolution)
+
+    def jacobian(self, p_world_mm) -> np.ndarray:
+        """``d(u, v)/d(x, y, z)`` of :meth:`project`, shape (..., 2, 3) [px/mm] (analytic)."""
+        q = self.world_to_local(p_world_mm)
+        z = q[..., 2]
+        k = self.chief_ray_scale_px
+        d = np.zeros(q.shape[:-1] + (2, 3))
+        d[..., 0, 0] = -k / z
+        d[..., 0, 2] = k * q[..., 0] / (z * z)
+        d[..., 1, 1] = -k / z
+        d[..., 1, 2] = k * q[..., 1] / (z * z)
+        # q = (p - t) R  ->  dq/dp = R^T
+        return d @ self.to_world_mitsuba[:3, :3].T
+
 
 # ---------------------------------------------------------------------- helpers
 def _point_polygon_distance(p, poly) -> float:
@@ -521,19 +581,41 @@ def _point_polygon_distance(p, poly) -> float:
 
 
 def alpha_from_z_geom(z_mm, focal_length_mm: float, focus_distance_mm: float):
-    """``alpha = s_i(s_o + z) / s_i(s_o)`` by the thin-lens equation (z > 0 farther)."""
-    so = focus_distance_mm + np.asarray(z_mm, dtype=float)
-    if np.any(so <= focal_length_mm):
+    """Refocus parameter ``alpha = s_i(s_o + z) / s_i(s_o)`` of the plane ``z_mm`` beyond the
+    focal plane, by the thin-lens equation (Ng 2005; ``z > 0`` farther from the camera,
+    ``alpha < 1`` there). The one place this formula is written: :meth:`PlenopticCamera.alpha`
+    and :func:`mitpiv.lightfield.alpha_from_z` call it.
+
+    Parameters
+    ----------
+    z_mm : float or array
+        Depth from the focal plane [mm], finite and ``> f - s_o``.
+    focal_length_mm : float
+        Main-lens focal length ``f`` [mm].
+    focus_distance_mm : float
+        Object distance of the focal plane ``s_o`` [mm] (``> f``).
+
+    Returns
+    -------
+    ndarray (shape of ``z_mm``)
+    """
+    f, so0 = float(focal_length_mm), float(focus_distance_mm)
+    z = np.asarray(z_mm, dtype=float)
+    so = so0 + z
+    finite = np.isfinite(z)
+    if not np.all(finite) or np.any(so <= f * (1 + 1e-9)):
+        got = "a non-finite z" if not np.all(finite) else f"min z = {np.min(z):.6g}"
         raise ConfigError(
-            f"alpha_from_z: z = {np.min(np.asarray(z_mm)):.6g} mm puts the object at or inside the focal length "
-            f"({focal_length_mm} mm from the lens; focal plane at {focus_distance_mm} mm). Use z > "
-            f"{focal_length_mm - focus_distance_mm:.6g} mm."
+            f"alpha_from_z: every z must be finite and > {f - so0:.6g} mm (the object must stay beyond the focal "
+            f"length, {f} mm from the lens; the focal plane is at {so0:.6g} mm); got {got}."
         )
-    return thin_lens_image_distance(focal_length_mm, so) / thin_lens_image_distance(focal_length_mm, focus_distance_mm)
+    return thin_lens_image_distance(f, so) / thin_lens_image_distance(f, so0)
 
 
-def _dof_limits(f, so, aperture, blur):
-    """Object-space (near, far) offsets where the blur spot on the MLA plane reaches ``blur``."""
+def dof_limits_geom(f, so, aperture, blur) -> tuple[float, float]:
+    """Object-space (near, far) offsets [mm from the focal plane] where the blur spot on the
+    MLA plane (at ``s_i`` of the focal plane ``so``) through an ``aperture`` [mm] wide lens of
+    focal length ``f`` [mm] reaches ``blur`` [mm] (Deem et al. 2016's construction)."""
     si = float(thin_lens_image_distance(f, so))
     # Blur on the plane at si from an image at si': aperture |si - si'| / si' = blur.
     si_far = si * aperture / (aperture + blur)  # image closer to the lens -> object farther
@@ -551,3 +633,6 @@ def depth_resolution_geom(f, so, aperture, pitch, n_u) -> float:
     dsi = pitch * si / base  # image-side shift of the refocus plane
     m = si / so
     return float(dsi / (m * m))
+
+
+_dof_limits = dof_limits_geom  # deprecated private name

@@ -7,6 +7,7 @@ model of a rendered image. Reconstructions on a :class:`VoxelGrid`: ``mlos``, ``
 (multi-plenoptic) and ``drt_mart`` (dense-ray-tracing MART of a raw light-field image).
 """
 
+from mitpiv.grid import VoxelGrid
 from mitpiv.reconstruct.calibration import (
     apply_homography,
     calibrate,
@@ -16,7 +17,6 @@ from mitpiv.reconstruct.calibration import (
     label_markers,
     plane_homographies,
 )
-from mitpiv.reconstruct.grid import VoxelGrid
 from mitpiv.reconstruct.mapping import CameraMapping, PinholeMapping, PolynomialMapping, mapping_from_metadata
 
 __all__ = [

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from mitpiv.errors import ConfigError
-from mitpiv.reconstruct.grid import VoxelGrid
+from mitpiv.grid import VoxelGrid
 from mitpiv.reconstruct.tomo import TOMO_METHODS, reconstruct_volume
 
 RECONSTRUCT_METHODS = TOMO_METHODS + ("plenoptic", "drt-mart")

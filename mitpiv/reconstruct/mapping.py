@@ -1,12 +1,14 @@
 """Camera mappings world [mm] -> pixels, with the derivative reconstruction needs.
 
-Every mapping has ``project(p_world) -> (..., 2)`` pixels (mitpiv convention: pixel
-``(i, j)`` spans ``[i, i+1)``, so its centre is at ``i + 0.5``) and ``jacobian(p_world) ->
-(..., 2, 3)`` = d(pixel)/d(world). Mappings:
+Every mapping offers the camera contract (:class:`mitpiv.physics.camera.Camera`):
+``project(p_world) -> (..., 2)`` pixels (mitpiv convention: pixel ``(i, j)`` spans
+``[i, i+1)``, so its centre is at ``i + 0.5``), ``in_front`` and ``visible`` (in front
+and on the sensor), ``jacobian(p_world) -> (..., 2, 3)`` = d(pixel)/d(world), and
+``to_dict``/``from_dict``. Mappings:
 
-- :class:`PinholeMapping`: pinhole + Brown-Conrady (a :class:`PinholeCamera`), either the
+- :class:`PinholeMapping`: a :class:`PinholeCamera` (pinhole + Brown-Conrady), either the
   true model from EXR metadata (:func:`mapping_from_metadata`, "perfect calibration") or
-  one fitted by :func:`mitpiv.reconstruct.calibrate`.
+  one fitted by :func:`mitpiv.reconstruct.calibrate`; every method is the camera's own.
 - :class:`PolynomialMapping`: Soloff's polynomial, cubic in x and y and quadratic in z (19
   terms per image coordinate), fitted by least squares on normalised coordinates.
 """
@@ -18,8 +20,7 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 from mitpiv.errors import ConfigError
-from mitpiv.physics.camera import PinholeCamera
-from mitpiv.physics.distortion import distort_jacobian
+from mitpiv.physics.camera import PinholeCamera, on_sensor
 
 __all__ = ["CameraMapping", "PinholeMapping", "PolynomialMapping", "mapping_from_metadata", "SOLOFF_TERMS"]
 
@@ -28,7 +29,7 @@ SOLOFF_TERMS = tuple((i, j, k) for k in range(3) for n in range(4 - k) for i in 
 
 
 class CameraMapping(ABC):
-    """Abstract base: subclasses implement ``project`` and ``jacobian``."""
+    """Abstract base: subclasses implement ``project``, ``jacobian`` and ``to_dict``."""
 
     resolution: tuple[int, int] | None = None
 
@@ -40,10 +41,32 @@ class CameraMapping(ABC):
     def jacobian(self, p_world) -> np.ndarray:
         """d(pixel)/d(world), (..., 2, 3) [px/mm]."""
 
-    def visible(self, p_world) -> np.ndarray:
+    @abstractmethod
+    def to_dict(self) -> dict:
+        """JSON-ready description with a ``"type"``; :meth:`from_dict` restores it."""
+
+    @classmethod
+    def from_dict(cls, d: dict) -> CameraMapping:
+        """The mapping of a :meth:`to_dict` description (any subclass, by its ``"type"``)."""
+        kinds = {"pinhole": PinholeMapping, "soloff_polynomial": PolynomialMapping}
+        kind = d.get("type") if isinstance(d, dict) else None
+        if kind not in kinds:
+            raise ConfigError(f"CameraMapping.from_dict: 'type' must be one of {sorted(kinds)}, got {kind!r}.")
+        return kinds[kind]._from_dict(d)
+
+    def in_front(self, p_world) -> np.ndarray:
         """Whether world points (..., 3) lie in front of the camera (all True for a mapping
         that does not know where its camera is, such as a fitted polynomial)."""
         return np.ones(np.shape(p_world)[:-1], dtype=bool)
+
+    def visible(self, p_world) -> np.ndarray:
+        """Points (..., 3) :meth:`in_front` whose projection lands on the sensor
+        ``[0, W) x [0, H)`` (only the first test when the mapping has no resolution)."""
+        front = self.in_front(p_world)
+        if self.resolution is None:
+            return front
+        with np.errstate(invalid="ignore", over="ignore"):
+            return front & on_sensor(self.project(p_world), self.resolution)
 
     def residuals(self, pixels, p_world) -> np.ndarray:
         """Reprojection error vectors [px]: project(world) - pixels."""
@@ -55,50 +78,64 @@ class CameraMapping(ABC):
 
 
 class PinholeMapping(CameraMapping):
-    """Pinhole + Brown-Conrady mapping of a :class:`PinholeCamera`."""
+    """The mapping of a :class:`PinholeCamera` (pinhole + Brown-Conrady, thin lens or not):
+    ``project``, ``in_front``, ``visible`` and ``jacobian`` are the camera's own."""
 
     def __init__(self, camera: PinholeCamera):
+        if not isinstance(camera, PinholeCamera):
+            raise ConfigError(f"PinholeMapping: 'camera' must be a PinholeCamera, got {type(camera).__name__}.")
         self.camera = camera
         self.resolution = camera.resolution
 
     def project(self, p_world) -> np.ndarray:
         return self.camera.project(p_world)
 
-    def visible(self, p_world) -> np.ndarray:
+    def in_front(self, p_world) -> np.ndarray:
         """Points in front of the pinhole (camera-frame z > 0); the projection of a point
         behind it lands on the image mirrored, so reconstructions must leave it out."""
-        return self.camera.world_to_camera(p_world)[..., 2] > 0
+        return self.camera.in_front(p_world)
+
+    def visible(self, p_world) -> np.ndarray:
+        return self.camera.visible(p_world)
 
     def jacobian(self, p_world) -> np.ndarray:
-        c = self.camera
-        pc = c.world_to_camera(p_world)
-        z = pc[..., 2]
-        x, y = pc[..., 0] / z, pc[..., 1] / z
-        _, _, a, b, cc, e = distort_jacobian(x, y, c.distortion)
-        f = c.focal_px
-        # d(x, y)/d(p_camera)
-        dn = np.zeros(pc.shape[:-1] + (2, 3))
-        dn[..., 0, 0] = 1 / z
-        dn[..., 0, 2] = -x / z
-        dn[..., 1, 1] = 1 / z
-        dn[..., 1, 2] = -y / z
-        dd = np.stack([np.stack([a, b], -1), np.stack([cc, e], -1)], -2) * f
-        return dd @ dn @ c.rotation
+        return self.camera.jacobian(p_world)
 
     def to_dict(self) -> dict:
         return {"type": "pinhole", "camera": self.camera.to_dict()}
 
+    @classmethod
+    def _from_dict(cls, d: dict) -> PinholeMapping:
+        return cls(PinholeCamera.from_dict(d["camera"]))
+
 
 def mapping_from_metadata(meta: dict) -> PinholeMapping:
-    """The true mapping of a rendered image from its EXR metadata (``meta["camera"]``)."""
-    cam = meta.get("camera", meta)
-    if not isinstance(cam, dict) or "R" not in cam or "focal_length_mm" not in cam:
+    """The true mapping of a rendered image from its EXR metadata (``meta["camera"]``, or
+    that entry itself), read by :func:`mitpiv.io.camera_from_metadata`.
+
+    Raises
+    ------
+    ConfigError
+        The image comes from a camera that is not a pinhole (a plenoptic raw image needs
+        the light-field methods).
+    FileFormatError
+        The metadata holds no usable camera (see :func:`~mitpiv.io.camera_from_metadata`).
+    """
+    from mitpiv.io.camera import camera_from_metadata
+
+    cam = meta.get("camera", meta) if isinstance(meta, dict) else meta
+    if isinstance(cam, dict) and cam.get("type") == "plenoptic":
         raise ConfigError(
-            "mapping_from_metadata: the metadata has no pinhole camera model (expected "
-            "meta['camera'] with 'R', 'focal_length_mm', ...); was the image rendered by a "
-            "distorted_pinhole sensor?"
+            "mapping_from_metadata: the metadata has no pinhole camera model but a plenoptic one; a raw "
+            "plenoptic image needs the light-field methods (mitpiv.reconstruct.plenoptic_volume, drt_mart)."
         )
-    return PinholeMapping(PinholeCamera.from_dict(cam))
+    camera = camera_from_metadata(meta)
+    if not isinstance(camera, PinholeCamera):
+        raise ConfigError(
+            f"mapping_from_metadata: the metadata has no pinhole camera model but a {type(camera).__name__}; "
+            f"was the image rendered by a distorted_pinhole sensor?"
+        )
+    return PinholeMapping(camera)
 
 
 class PolynomialMapping(CameraMapping):
@@ -158,3 +195,10 @@ class PolynomialMapping(CameraMapping):
         return {"type": "soloff_polynomial", "terms": [list(t) for t in SOLOFF_TERMS],
                 "coefficients": self.coefficients.tolist(), "centre_mm": self.centre_mm.tolist(),
                 "scale_mm": self.scale_mm.tolist(), "resolution": None if self.resolution is None else list(self.resolution)}
+
+    @classmethod
+    def _from_dict(cls, d: dict) -> PolynomialMapping:
+        terms = [tuple(t) for t in d.get("terms", SOLOFF_TERMS)]
+        if terms != list(SOLOFF_TERMS):
+            raise ConfigError(f"PolynomialMapping.from_dict: 'terms' {terms} are not Soloff's 19 terms {list(SOLOFF_TERMS)}.")
+        return cls(d["coefficients"], d["centre_mm"], d["scale_mm"], d.get("resolution"))

@@ -21,11 +21,11 @@ import time
 import numpy as np
 
 from mitpiv.errors import ConfigError
+from mitpiv.grid import VoxelGrid
 from mitpiv.lightfield.decode import LightField
 from mitpiv.lightfield.refocus import refocus_volume
 from mitpiv.physics.plenoptic import PlenopticCamera
 from mitpiv.reconstruct._kernels import kernels
-from mitpiv.reconstruct.grid import VoxelGrid
 from mitpiv.reconstruct.tomo import check_iterations
 
 __all__ = ["plenoptic_volume", "fuse", "drt_weights", "drt_mart", "FUSE_NORMALISATIONS"]

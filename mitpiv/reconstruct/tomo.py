@@ -35,9 +35,9 @@ import numpy as np
 from scipy import ndimage
 
 from mitpiv.errors import ConfigError, MitpivWarning
+from mitpiv.grid import VoxelGrid
 from mitpiv.physics.camera import PinholeCamera
 from mitpiv.reconstruct._kernels import CIRCLE, GAUSSIAN, PIXEL_RADIUS, kernels
-from mitpiv.reconstruct.grid import VoxelGrid
 from mitpiv.reconstruct.mapping import CameraMapping, PinholeMapping, mapping_from_metadata
 
 __all__ = ["mlos", "mart", "sapiv_refocus", "preprocess_images", "voxel_weights", "INTERPOLATIONS", "WEIGHT_MODELS"]

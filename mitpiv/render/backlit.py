@@ -58,17 +58,10 @@ def stack_depth(camera, points_world) -> np.ndarray:
 def stack_pixels(lf, u_index, v_index):
     """Refocused-image indices (column, row; pixel centres at integers) -> sensor pixels of
     the lenslet lattice, the coordinates a :class:`Dewarp` is fitted in."""
-    from mitpiv.lightfield.refocus import _grid_steps
+    from mitpiv.lightfield.refocus import grid_steps
 
-    ds, dt = _grid_steps(lf)
+    ds, dt = grid_steps(lf)
     return lf.s_px[0] + np.asarray(u_index) * ds, lf.t_px[0] + np.asarray(v_index) * dt
-
-
-def _predict_px(camera, points_world):
-    """Nominal lenslet-lattice pixel of world points (thin lens through the main-lens centre)."""
-    q = camera.world_to_local(points_world)
-    x_mla = -q[:, :2] * camera.image_distance_mm / q[:, 2:3]
-    return camera.sensor_mm_to_px(x_mla * camera.image_scale)
 
 
 def calibrate_dewarp(sensor: dict, depths_mm, *, target=None, spp: int = 32, white=None, degree_xy: int = 3,
@@ -114,7 +107,7 @@ def calibrate_dewarp(sensor: dict, depths_mm, *, target=None, spp: int = 32, whi
         # clean renders: half the dot contrast (the default noise floor assumes a noisy image)
         det = detect_dots(img, threshold=0.5 * float(np.percentile(img, 99.9) - np.median(img))) - 0.5  # indices
         det_px = np.column_stack(stack_pixels(lf, det[:, 0], det[:, 1]))
-        mi_, di_ = label_markers(det_px, _predict_px(cam, world))
+        mi_, di_ = label_markers(det_px, cam.project(world))
         uvz.append(np.column_stack([det_px[di_], np.full(mi_.size, zs)]))
         xyz.append(world[mi_])
         if progress:

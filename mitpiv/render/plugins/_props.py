@@ -72,7 +72,8 @@ def read_placement(rd: PropertyReader, props: mi.Properties):
     when the placement properties are absent (the sensor uses ``to_world``)."""
     import numpy as np
 
-    from mitpiv.physics.camera import _CV_TO_MI, place_camera
+    from mitpiv.physics.camera import CV_TO_MITSUBA as _CV_TO_MI
+    from mitpiv.physics.camera import place_camera
 
     placement = [rd.has(k) for k in ("azimuth_deg", "elevation_deg", "distance_mm")]
     if not any(placement):

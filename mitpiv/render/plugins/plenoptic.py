@@ -92,7 +92,8 @@ import mitsuba as mi
 import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
-from mitpiv.physics.camera import _CV_TO_MI, PinholeCamera
+from mitpiv.physics.camera import CV_TO_MITSUBA as _CV_TO_MI
+from mitpiv.physics.camera import PinholeCamera
 from mitpiv.physics.plenoptic import PRESETS, PlenopticCamera
 from mitpiv.render.plugins._props import PropertyReader, read_placement
 from mitpiv.render.plugins._sensor import MitpivSensor, film_resolution
