@@ -208,9 +208,9 @@ def apply_sensor(image, model: SensorModel | None = None, *, seed: int = 0, scen
         gaussian_noise_percent=5)``) or override fields of ``model`` (e.g. an explicit
         ``exposure=`` or noise ``peak=``).
     seed : int
-        Seed of the noise (NumPy's PCG64, ``np.random.default_rng(seed)``); the same seed
-        gives the same image. :func:`mitpiv.streams.sensor_seed` derives one per camera
-        and frame.
+        Seed of the noise, in [0, 2**64) (NumPy's PCG64, ``np.random.default_rng(seed)``);
+        the same seed gives the same image. :func:`mitpiv.streams.sensor_seed` derives one
+        per camera and frame.
     scene_peak : float, optional
         Maximum rendered value over the set this image belongs to [render units], >= the
         image's maximum; default the image's maximum.
@@ -219,7 +219,10 @@ def apply_sensor(image, model: SensorModel | None = None, *, seed: int = 0, scen
     -------
     uint8 / uint16 array with ``bit_depth``, else float64 counts.
     """
+    from mitpiv.streams import check_seed
+
     m = _model(model, kwargs)
+    seed = check_seed(seed, upper=2**64)
     img = _image(image, "apply_sensor")
     own = float(img.max())
     if scene_peak is None:
@@ -263,12 +266,15 @@ class SensorSetResult:
     seeds: dict = field(default_factory=dict)
 
     def metadata(self, key) -> dict:
-        """JSON-ready record of how image ``key`` was taken (for its file's metadata)."""
+        """JSON-ready record of how image ``key`` was taken, for its file's metadata: the
+        model's fields (as :meth:`SensorModel.to_dict`) and what was used with them,
+        ``exposure_used_photons_per_unit``, ``scene_peak``, ``noise_peak_counts``,
+        ``experiment_seed``, ``sensor_seed`` and ``stream`` (purpose, camera, frame)."""
         cam, frame = key
-        return {"model": self.model.to_dict(), "exposure_photons_per_unit": self.exposure,
+        return {**self.model.to_dict(), "exposure_used_photons_per_unit": self.exposure,
                 "scene_peak": self.scene_peak, "noise_peak_counts": self.noise_peak_counts,
-                "seed": self.seed, "sensor_seed": self.seeds[key], "stream": {"purpose": "sensor",
-                                                                              "camera": cam, "frame": frame}}
+                "experiment_seed": self.seed, "sensor_seed": self.seeds[key],
+                "stream": {"purpose": "sensor", "camera": cam, "frame": frame}}
 
 
 def apply_sensor_set(images: Mapping, model: SensorModel | None = None, *, seed: int, progress=None,

@@ -47,16 +47,18 @@ SEED_MAX = 2**63
 _FRAME_MAX = 2**32
 
 
-def check_seed(seed, *, name: str = "seed") -> int:
+def check_seed(seed, *, name: str = "seed", upper: int = SEED_MAX) -> int:
     """Return ``seed`` as a Python int, or raise :class:`ConfigError` unless it is an integer
-    in ``[0, 2**63)`` (booleans and floats, even integral ones, are rejected)."""
+    in ``[0, upper)`` (booleans and floats, even integral ones, are rejected). ``upper`` is
+    ``2**63`` for an experiment seed (a TOML integer), ``2**64`` for a derived seed."""
+    bound = "2**63" if upper == SEED_MAX else ("2**64" if upper == 2**64 else str(upper))
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
-        raise ConfigError(f"parameter '{name}' must be an integer in [0, 2**63), got {seed!r} "
+        raise ConfigError(f"parameter '{name}' must be an integer in [0, {bound}), got {seed!r} "
                           f"({type(seed).__name__}). Give a whole number such as 0 or 1234.")
     s = int(seed)
-    if not 0 <= s < SEED_MAX:
-        raise ConfigError(f"parameter '{name}' must be an integer in [0, 2**63), got {s}. "
-                          f"Give a non-negative seed below 9223372036854775808.")
+    if not 0 <= s < upper:
+        raise ConfigError(f"parameter '{name}' must be an integer in [0, {bound}), got {s}. "
+                          f"Give a non-negative seed below {upper}.")
     return s
 
 

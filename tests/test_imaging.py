@@ -6,6 +6,8 @@ Statistical tolerances: 5 standard errors of the sample mean / sample variance o
 correct implementation fails with probability < 1e-6 per check.
 """
 
+import json
+
 import numpy as np
 import pytest
 
@@ -251,9 +253,11 @@ def test_sensor_set_metadata_and_bad_input():
     img = np.ones((8, 8))
     res = apply_sensor_set({("camA", 2): img}, SensorModel(peak_photons=10.0, gaussian_noise_percent=1.0), seed=5)
     meta = res.metadata(("camA", 2))
-    assert meta["exposure_photons_per_unit"] == 10.0 and meta["scene_peak"] == 1.0
-    assert meta["noise_peak_counts"] == 10.0 and meta["seed"] == 5
-    assert meta["sensor_seed"] == res.seeds[("camA", 2)] and meta["model"]["peak_photons"] == 10.0
+    assert meta["exposure_used_photons_per_unit"] == 10.0 and meta["scene_peak"] == 1.0
+    assert meta["noise_peak_counts"] == 10.0 and meta["experiment_seed"] == 5
+    assert meta["sensor_seed"] == res.seeds[("camA", 2)] and meta["peak_photons"] == 10.0 and meta["exposure"] is None
+    assert meta["stream"] == {"purpose": "sensor", "camera": "camA", "frame": 2}
+    json.dumps(meta)  # JSON-ready
     for bad, match in (({}, "non-empty mapping"), ([img], "mapping"), ({("camA",): img}, "camera_id"),
                        ({(0, 0): img}, "camera_id"), ({("camA", -1): img}, "camera_id"),
                        ({("camA", 0): -img}, "finite and >= 0")):
@@ -262,3 +266,6 @@ def test_sensor_set_metadata_and_bad_input():
     for seed in (-1, 1.5, 2**63, None):
         with pytest.raises(ConfigError, match="seed"):
             apply_sensor_set({("camA", 0): img}, seed=seed)
+    for seed in (-1, 2.0, 2**64):
+        with pytest.raises(ConfigError, match="seed"):
+            apply_sensor(img, seed=seed)

@@ -60,6 +60,9 @@ def test_bad_seeds_are_config_errors_naming_seed(seed):
 
 def test_good_seeds_and_bad_keys():
     assert streams.check_seed(np.int64(5)) == 5 and streams.check_seed(2**63 - 1) == 2**63 - 1
+    assert streams.check_seed(2**64 - 1, upper=2**64) == 2**64 - 1  # a derived 64-bit seed
+    with pytest.raises(ConfigError, match=r"'seed' must be an integer in \[0, 2\*\*64\)"):
+        streams.check_seed(2**64, upper=2**64)
     with pytest.raises(ConfigError, match="purpose"):
         streams.spawn_key("", "cam0", 0)
     with pytest.raises(ConfigError, match="camera"):
