@@ -158,7 +158,7 @@ def _particle_image(rng, shape=SHAPE, n=400):
     """A sparse image of Gaussian spots of random brightness (a rendered particle image)."""
     yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
     img = np.zeros(shape)
-    for y, x, a in zip(rng.uniform(0, shape[0], n), rng.uniform(0, shape[1], n), rng.uniform(0.2, 1.0, n)):
+    for y, x, a in zip(rng.uniform(0, shape[0], n), rng.uniform(0, shape[1], n), rng.uniform(0.2, 1.0, n), strict=True):
         m = (np.abs(yy - y) < 5) & (np.abs(xx - x) < 5)
         img[m] += a * np.exp(-((yy[m] - y) ** 2 + (xx[m] - x) ** 2) / (2 * 1.2**2))
     return img

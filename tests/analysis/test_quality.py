@@ -9,8 +9,16 @@ import numpy as np
 import pytest
 from scipy.stats import pearsonr, rankdata, spearmanr
 
-from mitpiv.analysis import (evaluate_volume, normalised_snr, plane_snr, quality_q, quality_q_zero_mean,
-                             rank_correlation, truth_volume, volume_quality)
+from mitpiv.analysis import (
+    evaluate_volume,
+    normalised_snr,
+    plane_snr,
+    quality_q,
+    quality_q_zero_mean,
+    rank_correlation,
+    truth_volume,
+    volume_quality,
+)
 from mitpiv.errors import ConfigError
 from mitpiv.reconstruct import VoxelGrid
 

@@ -7,9 +7,9 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mitpiv.render.render import render_scene
 from mitpiv import streams
 from mitpiv.io import read_exr, write_particles_ply
+from mitpiv.render.render import render_scene
 from mitpiv.render.scene import load_scene
 
 from .helpers import camera, render, scene
