@@ -13,25 +13,40 @@ The sensor chain (each stage optional, applied in this order, vectorised, seeded
                                                              tomographic simulation studies)
       --bit_depth-->    round to integers, clip to [0, 2^bits - 1]
 
-``exposure`` converts the renderer's pixel values to mean photon counts (photons per pixel
-per unit of image value); ``peak_photons`` is the alternative that scales the brightest
-pixel to that many photons; with neither, image values are taken as photons. With ``bit_depth`` the result is an unsigned integer array
-(uint8 for 8 bits, uint16 up to 16); without, float64 counts.
+Exposure is a physical, scene-wide quantity. ``exposure`` is the primary model: photons
+per pixel per unit of rendered radiance (the renderer's pixel value, see
+:data:`mitpiv.render.render.PIXEL_UNITS`), the same for every camera and frame, so a camera
+in forward scatter that receives three times the light of one in back scatter records
+three times the counts. ``peak_photons`` is the alternative that fixes the exposure from
+the data: the brightest pixel *of the whole set of images* (every camera and frame of an
+experiment, see :func:`apply_sensor_set`) becomes that many photons, i.e. ``exposure =
+peak_photons / scene_peak``. With neither, image values are taken as photons
+(``exposure = 1``). Likewise the reference ``peak`` of ``gaussian_noise_percent`` is, unless
+given, the noise-free peak count of the whole set, so the noise has one absolute sigma on
+every image. :func:`apply_sensor` on one image treats that image as the whole set (or takes
+the set's peak as ``scene_peak``).
+
+With ``bit_depth`` the result is an unsigned integer array (uint8 for 8 bits, uint16 up to
+16); without, float64 counts.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import numbers
-from dataclasses import asdict, dataclass
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 
 import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
 
-__all__ = ["SensorModel", "apply_sensor", "convolve_psf", "sensor_mean_variance"]
+__all__ = ["SensorModel", "SensorSetResult", "apply_sensor", "apply_sensor_set", "resolve_exposure",
+           "convolve_psf", "sensor_mean_variance"]
 
+_log = logging.getLogger(__name__)
 _BIT_DEPTHS = (8, 10, 12, 14, 16)
 
 
@@ -41,8 +56,9 @@ class SensorModel:
 
     Attributes
     ----------
-    exposure : photons per pixel per unit of image value.
-    peak_photons : alternative to ``exposure``: the image maximum becomes this many photons.
+    exposure : photons per pixel per unit of rendered radiance (scene-wide).
+    peak_photons : alternative to ``exposure``: the maximum over the whole set of images
+        (all cameras and frames; one image: its own maximum) becomes this many photons.
     quantum_efficiency : electrons per photon, in (0, 1].
     shot_noise : Poisson photon (shot) noise.
     dark_current_e_per_s, exposure_time_s : dark electrons (Poisson) = rate x time.
@@ -51,7 +67,9 @@ class SensorModel:
     gain_e_per_count : conversion gain [electrons per count (ADU)].
     black_level : offset added to the counts [ADU].
     gaussian_noise_percent : white Gaussian noise with sigma = this percentage of ``peak``
-        (default the noise-free image maximum, in counts), as in tomographic PIV studies.
+        [counts], as in tomographic PIV studies; the same sigma on every image of a set.
+    peak : reference of ``gaussian_noise_percent`` [counts]; default the noise-free peak
+        count of the whole set of images (``exposure * QE * scene_peak / gain``).
     bit_depth : 8, 10, 12, 14 or 16; rounds and clips to the ADC range.
     """
 
@@ -98,42 +116,62 @@ class SensorModel:
         return asdict(self)
 
 
-def apply_sensor(image, model: SensorModel | None = None, *, seed: int = 0, **kwargs) -> np.ndarray:
-    """Turn a rendered image into sensor counts.
+def _model(model, kwargs) -> SensorModel:
+    if model is None:
+        return SensorModel(**kwargs)
+    if not isinstance(model, SensorModel):
+        raise ConfigError(f"sensor: 'model' must be a SensorModel or None, got {type(model).__name__}.")
+    return SensorModel(**{**model.to_dict(), **kwargs}) if kwargs else model
+
+
+def _image(image, what: str) -> np.ndarray:
+    img = np.asarray(image, dtype=np.float64)
+    if img.ndim != 2 or img.size == 0:
+        raise ConfigError(f"{what}: image must be a non-empty 2D array, got shape {img.shape}.")
+    if not np.all(np.isfinite(img)) or np.any(img < 0):
+        raise ConfigError(f"{what}: image must be finite and >= 0 (a rendered irradiance).")
+    return img
+
+
+def resolve_exposure(model: SensorModel, scene_peak: float) -> tuple[float, float | None]:
+    """The exposure and the Gaussian-noise reference a set of images is taken with.
 
     Parameters
     ----------
-    image : (H, W) array
-        Rendered image (finite, >= 0).
-    model : SensorModel, optional
-        Sensor parameters; keyword arguments build one (``apply_sensor(img, bit_depth=8,
-        gaussian_noise_percent=5)``) or override fields of ``model``.
-    seed : int
-        Seed of the noise (NumPy's PCG64); the same seed gives the same image.
+    model : SensorModel
+    scene_peak : float
+        Maximum rendered value over the whole set of images [render units], >= 0.
 
     Returns
     -------
-    uint8 / uint16 array with ``bit_depth``, else float64 counts.
+    exposure : float
+        Photons per pixel per unit of rendered radiance: ``model.exposure``, else
+        ``peak_photons / scene_peak`` (0 for an all-black set), else 1.
+    noise_peak_counts : float or None
+        Reference of ``gaussian_noise_percent`` [counts]: ``model.peak``, else
+        ``exposure * QE * scene_peak / gain``; None without Gaussian noise.
     """
-    if model is None:
-        model = SensorModel(**kwargs)
-    elif kwargs:
-        model = SensorModel(**{**model.to_dict(), **kwargs})
-    img = np.asarray(image, dtype=np.float64)
-    if img.ndim != 2 or img.size == 0:
-        raise ConfigError(f"apply_sensor: image must be a non-empty 2D array, got shape {img.shape}.")
-    if not np.all(np.isfinite(img)) or np.any(img < 0):
-        raise ConfigError("apply_sensor: image must be finite and >= 0 (a rendered irradiance).")
-    rng = np.random.default_rng(seed)
-    m = model
-    if m.peak_photons is not None:
-        top = img.max()
-        photons = img * (m.peak_photons / top) if top > 0 else img * 0.0
-    elif m.exposure is not None:
-        photons = img * m.exposure
+    top = float(scene_peak)
+    if not (math.isfinite(top) and top >= 0):
+        raise ConfigError(f"sensor: 'scene_peak' must be a finite number >= 0 [render units], got {scene_peak!r}.")
+    if model.exposure is not None:
+        exposure = float(model.exposure)
+    elif model.peak_photons is not None:
+        exposure = model.peak_photons / top if top > 0 else 0.0
+        if top == 0:
+            _log.warning("sensor: every image of the set is black; peak_photons gives no exposure.")
     else:
-        photons = img  # image values are photons already
-    mean_e = photons * m.quantum_efficiency
+        exposure = 1.0  # image values are photons already
+    noise_peak = None
+    if model.gaussian_noise_percent > 0:
+        noise_peak = float(model.peak) if model.peak is not None else \
+            exposure * model.quantum_efficiency * top / model.gain_e_per_count
+    return exposure, noise_peak
+
+
+def _counts(img: np.ndarray, m: SensorModel, rng: np.random.Generator, exposure: float,
+            noise_peak: float | None) -> np.ndarray:
+    mean_e = img * (exposure * m.quantum_efficiency)
     e = rng.poisson(mean_e).astype(np.float64) if m.shot_noise else mean_e
     dark = m.dark_current_e_per_s * m.exposure_time_s
     if dark > 0:
@@ -144,8 +182,7 @@ def apply_sensor(image, model: SensorModel | None = None, *, seed: int = 0, **kw
         e = e + rng.normal(0.0, m.read_noise_e, size=e.shape)
     counts = e / m.gain_e_per_count + m.black_level
     if m.gaussian_noise_percent > 0:
-        peak = m.peak if m.peak is not None else float(np.max(mean_e)) / m.gain_e_per_count
-        counts = counts + rng.normal(0.0, m.gaussian_noise_percent / 100.0 * peak, size=counts.shape)
+        counts = counts + rng.normal(0.0, m.gaussian_noise_percent / 100.0 * noise_peak, size=counts.shape)
     if m.bit_depth is None:
         return counts
     top = 2 ** m.bit_depth - 1
@@ -153,11 +190,154 @@ def apply_sensor(image, model: SensorModel | None = None, *, seed: int = 0, **kw
     return out.astype(np.uint8 if m.bit_depth == 8 else np.uint16)
 
 
+def apply_sensor(image, model: SensorModel | None = None, *, seed: int = 0, scene_peak: float | None = None,
+                 **kwargs) -> np.ndarray:
+    """Turn one rendered image into sensor counts.
+
+    The image is the whole set of images unless ``scene_peak`` says otherwise: with
+    ``peak_photons`` (and for the default reference of ``gaussian_noise_percent``) its own
+    maximum is the peak. For the cameras and frames of one experiment use
+    :func:`apply_sensor_set`, or pass the set's maximum as ``scene_peak``.
+
+    Parameters
+    ----------
+    image : (H, W) array
+        Rendered image (finite, >= 0) [render units].
+    model : SensorModel, optional
+        Sensor parameters; keyword arguments build one (``apply_sensor(img, bit_depth=8,
+        gaussian_noise_percent=5)``) or override fields of ``model`` (e.g. an explicit
+        ``exposure=`` or noise ``peak=``).
+    seed : int
+        Seed of the noise, in [0, 2**64) (NumPy's PCG64, ``np.random.default_rng(seed)``);
+        the same seed gives the same image. :func:`mitpiv.streams.sensor_seed` derives one
+        per camera and frame.
+    scene_peak : float, optional
+        Maximum rendered value over the set this image belongs to [render units], >= the
+        image's maximum; default the image's maximum.
+
+    Returns
+    -------
+    uint8 / uint16 array with ``bit_depth``, else float64 counts.
+    """
+    from mitpiv.streams import check_seed
+
+    m = _model(model, kwargs)
+    seed = check_seed(seed, upper=2**64)
+    img = _image(image, "apply_sensor")
+    own = float(img.max())
+    if scene_peak is None:
+        scene_peak = own
+    elif not (isinstance(scene_peak, numbers.Real) and math.isfinite(scene_peak) and scene_peak >= own):
+        raise ConfigError(f"apply_sensor: 'scene_peak' must be the maximum over a set that holds this image, "
+                          f">= its maximum {own!r}, got {scene_peak!r}.")
+    exposure, noise_peak = resolve_exposure(m, scene_peak)
+    return _counts(img, m, np.random.default_rng(seed), exposure, noise_peak)
+
+
+@dataclass(frozen=True)
+class SensorSetResult:
+    """Counts of a set of images and what they were taken with.
+
+    Attributes
+    ----------
+    counts : dict {(camera_id, frame): (H, W) array}
+        Sensor counts (uint8 / uint16 with ``bit_depth``, else float64), in input order.
+    model : SensorModel
+    exposure : float
+        Photons per pixel per unit of rendered radiance, the same for every image.
+    scene_peak : float
+        Maximum rendered value over the set [render units].
+    noise_peak_counts : float or None
+        Reference peak of ``gaussian_noise_percent`` [counts] (sigma = X/100 of it).
+    seed : int
+        The experiment seed.
+    seeds : dict {(camera_id, frame): int}
+        The derived 64-bit noise seed of each image
+        (:func:`mitpiv.streams.sensor_seed`); ``apply_sensor(image, model, seed=seeds[key],
+        scene_peak=scene_peak)`` reproduces ``counts[key]``.
+    """
+
+    counts: dict
+    model: SensorModel
+    exposure: float
+    scene_peak: float
+    noise_peak_counts: float | None
+    seed: int
+    seeds: dict = field(default_factory=dict)
+
+    def metadata(self, key) -> dict:
+        """JSON-ready record of how image ``key`` was taken, for its file's metadata: the
+        model's fields (as :meth:`SensorModel.to_dict`) and what was used with them,
+        ``exposure_used_photons_per_unit``, ``scene_peak``, ``noise_peak_counts``,
+        ``experiment_seed``, ``sensor_seed`` and ``stream`` (purpose, camera, frame)."""
+        cam, frame = key
+        return {**self.model.to_dict(), "exposure_used_photons_per_unit": self.exposure,
+                "scene_peak": self.scene_peak, "noise_peak_counts": self.noise_peak_counts,
+                "experiment_seed": self.seed, "sensor_seed": self.seeds[key],
+                "stream": {"purpose": "sensor", "camera": cam, "frame": frame}}
+
+
+def apply_sensor_set(images: Mapping, model: SensorModel | None = None, *, seed: int, progress=None,
+                     **kwargs) -> SensorSetResult:
+    """Turn a set of rendered images (every camera and frame of an experiment) into counts
+    with one scene-wide exposure and one independent noise stream per image.
+
+    The set's maximum rendered value (``scene_peak``) fixes the exposure once (with
+    ``peak_photons``) and the reference peak of ``gaussian_noise_percent``; so two cameras
+    whose rendered images differ 3:1 keep a 3:1 mean count and see the same noise sigma.
+    Image ``(camera, frame)`` takes its noise from
+    ``np.random.default_rng(mitpiv.streams.sensor_seed(seed, camera, frame))``: independent
+    of the other images, and unchanged when the set holds other cameras or frames.
+
+    Parameters
+    ----------
+    images : mapping {(camera_id: str, frame: int): (H, W) array}
+        Rendered images (finite, >= 0) [render units]; shapes may differ between cameras.
+    model : SensorModel, optional
+        Sensor parameters; keyword arguments build one or override its fields.
+    seed : int
+        The experiment seed, an integer in [0, 2**63).
+    progress : None, bool or callable
+        See :mod:`mitpiv.progress`.
+
+    Returns
+    -------
+    SensorSetResult
+        ``counts`` per key, and ``exposure``, ``scene_peak``, ``noise_peak_counts`` and the
+        derived ``seeds``; ``result.metadata(key)`` is the record for the image's file.
+    """
+    from mitpiv import streams
+    from mitpiv.progress import track
+
+    m = _model(model, kwargs)
+    seed = streams.check_seed(seed)
+    if not isinstance(images, Mapping) or not images:
+        raise ConfigError("apply_sensor_set: 'images' must be a non-empty mapping {(camera_id, frame): 2D array}, "
+                          f"got {type(images).__name__} of length {len(images) if hasattr(images, '__len__') else '?'}.")
+    arrays = {}
+    for key, image in images.items():
+        if not (isinstance(key, tuple) and len(key) == 2 and isinstance(key[0], str)
+                and isinstance(key[1], numbers.Integral) and not isinstance(key[1], bool) and key[1] >= 0):
+            raise ConfigError(f"apply_sensor_set: every key must be (camera_id: str, frame: int >= 0), got {key!r}.")
+        arrays[(key[0], int(key[1]))] = _image(image, f"apply_sensor_set: image {key!r}")
+    if len(arrays) != len(images):
+        raise ConfigError("apply_sensor_set: two keys name the same (camera_id, frame).")
+    scene_peak = max(float(a.max()) for a in arrays.values())
+    exposure, noise_peak = resolve_exposure(m, scene_peak)
+    counts, seeds = {}, {}
+    for key in track(list(arrays), desc="sensor", progress=progress, unit="image"):
+        seeds[key] = streams.sensor_seed(seed, *key)
+        counts[key] = _counts(arrays[key], m, np.random.default_rng(seeds[key]), exposure, noise_peak)
+    return SensorSetResult(counts=counts, model=m, exposure=exposure, scene_peak=scene_peak,
+                           noise_peak_counts=noise_peak, seed=seed, seeds=seeds)
+
+
 def sensor_mean_variance(signal_photons: float, model: SensorModel) -> tuple[float, float]:
     """Mean and variance of the counts for a uniform signal (before clipping/rounding).
 
     The photon-transfer relation: ``var = (QE S [shot] + D t) / g^2 + sigma_r^2 / g^2
-    + (X/100 peak)^2``, ``mean = (QE S + D t) / g + black``.
+    + (X/100 peak)^2``, ``mean = (QE S + D t) / g + black``; ``peak`` defaults to the
+    noise-free signal ``QE S / g`` (the uniform image is the whole set).
     """
     qe_s = model.quantum_efficiency * signal_photons
     dark = model.dark_current_e_per_s * model.exposure_time_s

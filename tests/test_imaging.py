@@ -6,11 +6,13 @@ Statistical tolerances: 5 standard errors of the sample mean / sample variance o
 correct implementation fails with probability < 1e-6 per check.
 """
 
+import json
+
 import numpy as np
 import pytest
 
 from mitpiv.errors import ConfigError
-from mitpiv.imaging import SensorModel, apply_sensor, convolve_psf, sensor_mean_variance
+from mitpiv.imaging import SensorModel, apply_sensor, apply_sensor_set, convolve_psf, sensor_mean_variance
 from mitpiv.io.counts import read_counts, write_counts
 
 SHAPE = (512, 512)
@@ -149,3 +151,121 @@ def test_fft_convolution_conserves_energy_and_centres():
     assert out[20, 30] == pytest.approx(0.5) and out[20, 31] == pytest.approx(0.3) and out[19, 30] == pytest.approx(0.2)
     with pytest.raises(ConfigError, match="odd"):
         convolve_psf(img, np.ones((4, 4)))
+
+
+# ------------------------------------------------------------------ scene-wide exposure
+def _particle_image(rng, shape=SHAPE, n=400):
+    """A sparse image of Gaussian spots of random brightness (a rendered particle image)."""
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
+    img = np.zeros(shape)
+    for y, x, a in zip(rng.uniform(0, shape[0], n), rng.uniform(0, shape[1], n), rng.uniform(0.2, 1.0, n), strict=True):
+        m = (np.abs(yy - y) < 5) & (np.abs(xx - x) < 5)
+        img[m] += a * np.exp(-((yy[m] - y) ** 2 + (xx[m] - x) ** 2) / (2 * 1.2**2))
+    return img
+
+
+def test_peak_photons_is_one_exposure_for_the_whole_set():
+    # A forward-scatter camera renders 3x the radiance of a back-scatter one.
+    base = _particle_image(np.random.default_rng(20))
+    fwd, back = 3.0 * base, base
+    res = apply_sensor_set({("fwd", 0): fwd, ("back", 0): back}, peak_photons=1000.0, seed=4)
+    exposure = 1000.0 / fwd.max()  # the set's brightest pixel becomes 1000 photons
+    assert res.scene_peak == fwd.max() and res.exposure == pytest.approx(exposure, rel=1e-15)
+    np.testing.assert_allclose(res.counts[("fwd", 0)], fwd * exposure, rtol=1e-12)
+    np.testing.assert_allclose(res.counts[("back", 0)], back * exposure, rtol=1e-12)
+    assert res.counts[("back", 0)].max() == pytest.approx(1000.0 / 3)  # not rescaled to its own peak
+    # With Poisson shot noise and 12-bit rounding (Poisson counts are integers: rounding
+    # adds nothing) each image's mean count is exposure * mean(radiance) within 5 standard
+    # errors, sqrt(sum(lambda)) / N; so the means keep the 3:1 ratio.
+    res = apply_sensor_set({("fwd", 0): fwd, ("back", 0): back}, peak_photons=1000.0, shot_noise=True,
+                           bit_depth=12, seed=4)
+    means = {}
+    for key, img in (("fwd", fwd), ("back", back)):
+        lam = img * exposure
+        c = res.counts[(key, 0)].astype(float)
+        assert abs(c.mean() - lam.mean()) < 5 * np.sqrt(lam.sum()) / lam.size
+        means[key] = c.mean()
+    se_ratio = 3 * np.sqrt(1 / (fwd * exposure).sum() + 1 / (back * exposure).sum())  # relative errors in quadrature
+    assert means["fwd"] / means["back"] == pytest.approx(3.0, abs=5 * se_ratio)
+
+
+def test_gaussian_noise_percent_has_one_sigma_for_the_whole_set():
+    base = _particle_image(np.random.default_rng(21))
+    fwd, back = 3.0 * base, base
+    res = apply_sensor_set({("fwd", 0): fwd, ("back", 0): back}, gaussian_noise_percent=5.0, seed=8)
+    sigma = 0.05 * fwd.max()  # 5 % of the set's noise-free peak count (values are photons)
+    assert res.noise_peak_counts == pytest.approx(fwd.max()) and res.exposure == 1.0
+    for key, img in (("fwd", fwd), ("back", back)):
+        _check(res.counts[(key, 0)] - img, 0.0, sigma**2, 3 * sigma**4)
+    # the means keep 3:1 (noise of sigma over N pixels: 5 standard errors of the ratio)
+    m_f, m_b = res.counts[("fwd", 0)].mean(), res.counts[("back", 0)].mean()
+    assert m_f / m_b == pytest.approx(3.0, abs=5 * sigma / np.sqrt(NPIX) * np.hypot(1 / m_b, 3 / m_b))
+
+
+def test_apply_sensor_on_one_image_of_a_set():
+    img = _particle_image(np.random.default_rng(22), shape=(64, 64), n=30)
+    # one image is the whole set: its own maximum is the peak
+    np.testing.assert_allclose(apply_sensor(img, peak_photons=100.0).max(), 100.0)
+    # the set's peak given explicitly
+    np.testing.assert_allclose(apply_sensor(img, peak_photons=100.0, scene_peak=3 * img.max()).max(), 100.0 / 3)
+    with pytest.raises(ConfigError, match="scene_peak"):
+        apply_sensor(img, peak_photons=100.0, scene_peak=0.5 * img.max())
+    # exposure is physical: no dependence on the peak at all
+    np.testing.assert_allclose(apply_sensor(img, exposure=7.0, scene_peak=10 * img.max()), 7.0 * img)
+
+
+def _noise_fields(res, images):
+    return {k: res.counts[k] - images[k] for k in images}
+
+
+def test_each_camera_and_frame_has_its_own_noise_stream():
+    img = np.full((256, 256), 50.0)
+    images = {("cam0", 0): img, ("cam1", 0): img, ("cam0", 1): img}
+    m = SensorModel(gaussian_noise_percent=10.0)
+    res = apply_sensor_set(images, m, seed=123)
+    n = _noise_fields(res, images)
+    # Independent fields: the sample Pearson r of N pairs has standard deviation 1/sqrt(N);
+    # |r| < 5/sqrt(N) fails by chance with probability 6e-7. A shared stream gives r = 1.
+    bound = 5 / np.sqrt(img.size)
+    for a, b in ((("cam0", 0), ("cam1", 0)), (("cam0", 0), ("cam0", 1)), (("cam1", 0), ("cam0", 1))):
+        r = np.corrcoef(n[a].ravel(), n[b].ravel())[0, 1]
+        assert abs(r) < bound, (a, b, r)
+    assert len(set(res.seeds.values())) == 3
+    # a rerun is bit-identical; the derived seed reproduces one image on its own
+    again = apply_sensor_set(images, m, seed=123)
+    assert all(np.array_equal(res.counts[k], again.counts[k]) for k in images) and again.seeds == res.seeds
+    for k in images:
+        assert np.array_equal(apply_sensor(img, m, seed=res.seeds[k], scene_peak=res.scene_peak), res.counts[k])
+    # another experiment seed gives other noise
+    assert not np.array_equal(apply_sensor_set(images, m, seed=124).counts[("cam0", 0)], res.counts[("cam0", 0)])
+
+
+def test_a_subset_of_cameras_keeps_each_cameras_stream():
+    rng = np.random.default_rng(30)
+    images = {(f"cam{i}", f): rng.random((32, 40)) * 100 for i in range(3) for f in (0, 1)}
+    m = SensorModel(exposure=2.0, shot_noise=True, read_noise_e=2.0, bit_depth=12)
+    full = apply_sensor_set(images, m, seed=9)
+    sub = apply_sensor_set({k: v for k, v in images.items() if k[0] == "cam1"}, m, seed=9)
+    assert all(np.array_equal(sub.counts[k], full.counts[k]) for k in sub.counts)
+
+
+def test_sensor_set_metadata_and_bad_input():
+    img = np.ones((8, 8))
+    res = apply_sensor_set({("camA", 2): img}, SensorModel(peak_photons=10.0, gaussian_noise_percent=1.0), seed=5)
+    meta = res.metadata(("camA", 2))
+    assert meta["exposure_used_photons_per_unit"] == 10.0 and meta["scene_peak"] == 1.0
+    assert meta["noise_peak_counts"] == 10.0 and meta["experiment_seed"] == 5
+    assert meta["sensor_seed"] == res.seeds[("camA", 2)] and meta["peak_photons"] == 10.0 and meta["exposure"] is None
+    assert meta["stream"] == {"purpose": "sensor", "camera": "camA", "frame": 2}
+    json.dumps(meta)  # JSON-ready
+    for bad, match in (({}, "non-empty mapping"), ([img], "mapping"), ({("camA",): img}, "camera_id"),
+                       ({(0, 0): img}, "camera_id"), ({("camA", -1): img}, "camera_id"),
+                       ({("camA", 0): -img}, "finite and >= 0")):
+        with pytest.raises(ConfigError, match=match):
+            apply_sensor_set(bad, seed=0)
+    for seed in (-1, 1.5, 2**63, None):
+        with pytest.raises(ConfigError, match="seed"):
+            apply_sensor_set({("camA", 0): img}, seed=seed)
+    for seed in (-1, 2.0, 2**64):
+        with pytest.raises(ConfigError, match="seed"):
+            apply_sensor(img, seed=seed)

@@ -3,10 +3,17 @@ and their matching to the truth, multi-pass 3D PIV, outlier detection and veloci
 
 from mitpiv.analysis.particles import FoundParticles, MatchResult, find_particles, match
 from mitpiv.analysis.piv3d import VectorField, piv3d, plot_velocity_error, uod, velocity_error
-from mitpiv.analysis.quality import plane_snr, quality_q, quality_q_zero_mean, rank_correlation, truth_volume
-from mitpiv.analysis.summary import evaluate_volume, velocity_error_summary
+from mitpiv.analysis.quality import (
+    normalised_snr,
+    plane_snr,
+    quality_q,
+    quality_q_zero_mean,
+    rank_correlation,
+    truth_volume,
+)
+from mitpiv.analysis.summary import evaluate_volume, velocity_error_summary, volume_quality
 
-__all__ = ["quality_q", "quality_q_zero_mean", "rank_correlation", "plane_snr", "truth_volume",
+__all__ = ["quality_q", "quality_q_zero_mean", "rank_correlation", "plane_snr", "normalised_snr", "truth_volume",
            "find_particles", "match", "FoundParticles", "MatchResult",
            "piv3d", "uod", "velocity_error", "plot_velocity_error", "VectorField",
-           "evaluate_volume", "velocity_error_summary"]
+           "evaluate_volume", "volume_quality", "velocity_error_summary"]

@@ -1,5 +1,5 @@
 """One-call evaluations shared by the CLI and the experiment runner: a reconstructed volume
-against the true particles, and the numbers kept from a velocity-error result."""
+against the true volume or particles, and the numbers kept from a velocity-error result."""
 
 from __future__ import annotations
 
@@ -7,17 +7,43 @@ from mitpiv.analysis.particles import MatchResult, find_particles, match
 from mitpiv.analysis.quality import plane_snr, quality_q, quality_q_zero_mean, rank_correlation, truth_volume
 
 VELOCITY_ERROR_KEYS = ("rms", "bias", "rms_vox", "bias_vox", "rms_magnitude", "n", "outlier_ratio", "units")
+#: The keys of :func:`volume_quality`, in order.
+VOLUME_QUALITY_KEYS = ("Q", "Q*", "Q'", "Q'_spearman", "SNR")
+
+
+def volume_quality(volume, truth_volume) -> dict:
+    """The quality block of a reconstruction against the true intensity volume.
+
+    Parameters
+    ----------
+    volume : (n_z, n_y, n_x) array
+        Reconstructed intensity volume.
+    truth_volume : (n_z, n_y, n_x) array
+        True intensity volume on the same grid (:func:`~mitpiv.analysis.truth_volume`).
+
+    Returns
+    -------
+    dict
+        ``"Q"`` (eq. 4.1), ``"Q*"`` (zero-mean Q), ``"Q'"`` (rank correlation, eq. 4.2,
+        uncentred), ``"Q'_spearman"`` (Spearman's centred rank correlation, the Q' of
+        mitpiv 0.1.0), ``"SNR"`` (eq. 4.3, z planes of ``volume``); floats. The
+        normalised SNR (eq. 4.4) needs a reference configuration's SNR:
+        :func:`~mitpiv.analysis.normalised_snr`.
+    """
+    return {"Q": quality_q(volume, truth_volume), "Q*": quality_q_zero_mean(volume, truth_volume),
+            "Q'": rank_correlation(volume, truth_volume),
+            "Q'_spearman": rank_correlation(volume, truth_volume, centred=True), "SNR": plane_snr(volume)}
 
 
 def evaluate_volume(volume, grid, truth_mm, *, method: str = "gauss3", threshold_rel: float = 0.1,
                     radius_voxels: float = 2.0) -> tuple[dict, MatchResult]:
-    """Q, Q*, Q' and SNR against the truth blobs, and the particles found and matched:
-    ({"Q", "Q*", "Q'", "SNR", "particles": MatchResult.summary()}, MatchResult)."""
+    """:func:`volume_quality` against the truth blobs (:func:`~mitpiv.analysis.truth_volume`
+    of ``truth_mm`` on ``grid``), and the particles found and matched:
+    ({"Q", "Q*", "Q'", "Q'_spearman", "SNR", "particles": MatchResult.summary()}, MatchResult)."""
     tv = truth_volume(truth_mm, grid)
     found = find_particles(volume, grid, method=method, threshold_rel=threshold_rel)
     res = match(found, truth_mm, grid=grid, radius_voxels=radius_voxels)
-    return {"Q": quality_q(volume, tv), "Q*": quality_q_zero_mean(volume, tv), "Q'": rank_correlation(volume, tv),
-            "SNR": plane_snr(volume), "particles": res.summary()}, res
+    return {**volume_quality(volume, tv), "particles": res.summary()}, res
 
 
 def velocity_error_summary(result: dict) -> dict:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-import sys
+import logging
 import time
 from pathlib import Path
 
@@ -16,7 +16,11 @@ import mitpiv
 from mitpiv.errors import ConfigError
 from mitpiv.io.atomic import atomic_path
 from mitpiv.io.exr import write_exr
+from mitpiv.progress import bar
 from mitpiv.render.scene import load_scene
+from mitpiv.streams import check_seed, render_seed
+
+_log = logging.getLogger(__name__)
 
 __all__ = ["render_scene", "render_sensor", "sensor_model", "write_preview", "PIXEL_UNITS"]
 
@@ -41,6 +45,9 @@ def sensor_model(sensor) -> dict:
 
 def render_sensor(scene, sensor, *, spp: int = 0, seed: int = 0) -> np.ndarray:
     """Render one sensor to a float32 (H, W) array, with the sensor's PSF if it asks for one.
+
+    ``seed`` is passed to ``mi.render`` as it is (a 32-bit seed; :func:`render_scene`
+    derives one per sensor and frame with :func:`mitpiv.streams.render_seed`).
 
     A ``distorted_pinhole`` with ``psf="fft"`` is rendered on a film ``oversample`` times
     finer (the film is restored afterwards) and convolved with its PSF
@@ -68,14 +75,31 @@ def render_sensor(scene, sensor, *, spp: int = 0, seed: int = 0) -> np.ndarray:
 
 
 def _integrator_info(scene) -> dict:
+    """The integrator and, for the particle tracer, what its last render really used."""
     integ = scene.integrator()
     info = {"type": integ.class_name() if hasattr(integ, "class_name") else type(integ).__name__}
-    for key in ("rays_per_particle", "occlusion"):
-        if hasattr(integ, key):
-            info[key] = getattr(integ, key)
     if hasattr(integ, "rays_for"):
         info["type"] = "particle_tracer"
+        stats = getattr(integ, "last_stats", {}) or {}
+        info["rays_per_particle_setting"] = integ.rays_per_particle
+        for key in ("rays_per_particle", "passes", "samples_per_particle", "occlusion"):
+            if key in stats:
+                info[key] = stats[key]
+        info.setdefault("occlusion", integ.occlusion)
+    else:
+        for key in ("rays_per_particle", "occlusion"):
+            if hasattr(integ, key):
+                info[key] = getattr(integ, key)
     return info
+
+
+def _spp_used(scene, sensor, spp) -> int:
+    """Samples per pixel a render really used: the particle tracer's passes (see
+    :mod:`mitpiv.render.plugins.particle_tracer`), else ``spp`` or the sensor sampler's count."""
+    integ = scene.integrator()
+    if hasattr(integ, "rays_for"):
+        return int(integ.last_stats.get("passes", 1))
+    return int(spp) if spp is not None else int(sensor.sampler().sample_count())
 
 
 def write_preview(path, image: np.ndarray, *, percentile: float = 99.9) -> Path:
@@ -122,9 +146,18 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
     params : dict, optional
         Further ``$name`` substitutions.
     spp : int, optional
-        Samples per pixel for camera-tracing integrators (default: the scene's sampler).
+        Samples per pixel for camera-tracing integrators (default: the scene's sampler);
+        for the particle tracer, independent passes of ``rays_per_particle`` rays each
+        (default one; a deterministic pinhole sensor always renders one). The metadata's
+        ``spp`` is what was used, ``spp_requested`` what was asked.
     seed : int
-        Seed of the sampler / particle tracer.
+        The experiment seed, in [0, 2**63). Each sensor and frame is rendered with its own
+        32-bit seed ``mitpiv.streams.render_seed(seed, sensor_id, frame)``, so cameras and
+        frames have independent Monte Carlo noise, and rendering a subset of the sensors
+        leaves each one's image unchanged. The metadata keeps ``seed`` (the experiment
+        seed) and ``render_seed`` (the derived one).
+    progress : None, bool or callable
+        One step per image (see :mod:`mitpiv.progress`).
     sensors : sequence of str, optional
         Ids of the sensors to render (default every sensor of the scene); an id the scene
         does not have is an error that lists the ids it has.
@@ -142,6 +175,7 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
         raise ConfigError("render_scene: 'frames' must name at least one frame.")
     if spp is not None and (int(spp) != spp or spp < 1):
         raise ConfigError(f"render_scene: 'spp' must be a positive integer, got {spp!r}.")
+    seed = check_seed(seed)
     if not xml_path.is_file():
         raise ConfigError(f"render_scene: scene file {str(xml_path)!r} does not exist.")
     # Load every frame first: a missing frame fails before anything is written.
@@ -158,46 +192,48 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
                               f"its sensors are {ids}.")
     chosen = set(ids if sensors is None else sensors)
     total = len(chosen) * len(scenes)
-    done = 0
-    for f, sc in scenes.items():
-        laser = [e.describe() for e in sc.emitters() if hasattr(e, "irradiance_numpy")]
-        particles = [sh.emitter().describe() for sh in sc.shapes()
-                     if sh.emitter() is not None and hasattr(sh.emitter(), "particle_arrays")]
-        for i, sensor in enumerate(sc.sensors()):
-            sid = sensor.id() or f"sensor{i}"
-            if sid not in chosen:
-                continue
-            t0 = time.perf_counter()
-            arr = render_sensor(sc, sensor, spp=spp or 0, seed=seed)
-            dt = time.perf_counter() - t0
-            meta = {
-                "mitpiv_version": mitpiv.__version__,
-                "mitsuba_version": mi.__version__,
-                "drjit_version": dr.__version__,
-                "variant": mi.variant(),
-                "scene_file": str(xml_path.resolve()),
-                "scene_sha256": sha,
-                "parameters": params,
-                "seed": seed,
-                "spp": spp if spp is not None else sensor.sampler().sample_count(),
-                "integrator": _integrator_info(sc),
-                "sensor_id": sid,
-                "camera": sensor_model(sensor),
-                "illumination": laser,
-                "particles": particles,
-                "frame": f,
-                "time_s": None if times is None or f >= len(times) else float(times[f]),
-                "units": {"length": "mm", "pixel_value": PIXEL_UNITS},
-                "truth_file": truth,
-                "render_seconds": dt,
-            }
-            path = out / f"{sid}_frame{f:03d}.exr"
-            write_exr(path, arr, meta)
-            write_preview(path.with_suffix(".png"), arr)
-            written.append(path)
-            done += 1
-            if progress:
-                print(f"[{done}/{total}] frame {f} {sid}: {arr.shape[1]}x{arr.shape[0]} in {dt:.2f} s -> {path}", file=sys.stderr, flush=True)
+    with bar(total, desc="render", progress=progress, unit="image") as pbar:
+        for f, sc in scenes.items():
+            laser = [e.describe() for e in sc.emitters() if hasattr(e, "irradiance_numpy")]
+            particles = [sh.emitter().describe() for sh in sc.shapes()
+                         if sh.emitter() is not None and hasattr(sh.emitter(), "particle_arrays")]
+            for i, sensor in enumerate(sc.sensors()):
+                sid = sensor.id() or f"sensor{i}"
+                if sid not in chosen:
+                    continue
+                rseed = render_seed(seed, sid, f)
+                t0 = time.perf_counter()
+                arr = render_sensor(sc, sensor, spp=spp or 0, seed=rseed)
+                dt = time.perf_counter() - t0
+                meta = {
+                    "mitpiv_version": mitpiv.__version__,
+                    "mitsuba_version": mi.__version__,
+                    "drjit_version": dr.__version__,
+                    "variant": mi.variant(),
+                    "scene_file": str(xml_path.resolve()),
+                    "scene_sha256": sha,
+                    "parameters": params,
+                    "seed": seed,
+                    "render_seed": rseed,
+                    "spp": _spp_used(sc, sensor, spp),
+                    "spp_requested": spp,
+                    "integrator": _integrator_info(sc),
+                    "sensor_id": sid,
+                    "camera": sensor_model(sensor),
+                    "illumination": laser,
+                    "particles": particles,
+                    "frame": f,
+                    "time_s": None if times is None or f >= len(times) else float(times[f]),
+                    "units": {"length": "mm", "pixel_value": PIXEL_UNITS},
+                    "truth_file": truth,
+                    "render_seconds": dt,
+                }
+                path = out / f"{sid}_frame{f:03d}.exr"
+                write_exr(path, arr, meta)
+                write_preview(path.with_suffix(".png"), arr)
+                written.append(path)
+                _log.info("frame %d %s: %dx%d in %.2f s -> %s", f, sid, arr.shape[1], arr.shape[0], dt, path)
+                pbar.update()
     index = out / "render.json"
     with atomic_path(index, suffix=".json") as tmp:
         tmp.write_text(json.dumps({"scene": str(xml_path), "frames": frames, "files": [str(p) for p in written]}, indent=2))

@@ -12,8 +12,9 @@
      - integer
      - --
      - 16
-     - Sensor samples per particle (aperture points of a thin-lens camera). A pinhole
-       sensor has a single direction to each particle, so it always uses 1.
+     - Sensor samples per particle and pass (aperture points of a thin-lens camera, PSF
+       offsets of a ``jitter`` PSF). A sensor without such samples (a pinhole) has a single
+       direction to each particle, so it always uses 1 (at the sensor's centre sample).
    * - occlusion
      - boolean
      - --
@@ -24,7 +25,18 @@
 For each particle ``i`` and ray ``j`` the sensor's ``sample_direction`` gives the pixel
 position ``uv``, the direction ``w`` toward the sensor and the importance weight ``W``;
 the value ``I_i(w) W N_pixels / rays`` is splatted at ``uv`` with the film's
-reconstruction filter. This is the particle-tracing estimator of the image that camera
+reconstruction filter.
+
+``spp`` (``mi.render(..., spp=N)``, mitpiv's ``render_scene(spp=N)``) is honoured as ``N``
+independent passes of ``rays_per_particle`` rays each, averaged: ``N x rays_per_particle``
+samples per particle, so the Monte Carlo variance falls as ``1 / N``. ``spp=0`` (not
+given) is one pass: the tracer does not take the sensor sampler's ``sample_count``, whose
+default (4) would silently quadruple the cost; ``rays_per_particle`` is its budget. A sensor
+without samples (pinhole, no jitter PSF) gives the same image on every pass, so it is
+rendered once, exactly. :attr:`ParticleTracer.last_stats` says what the last render used
+(``passes``, ``rays_per_particle``, ``samples_per_particle``, ``spp_requested``).
+
+This is the particle-tracing estimator of the image that camera
 tracing (Mitsuba's ``direct`` integrator) estimates pixel by pixel, so both agree within
 their noise. Works with ``distorted_pinhole`` and with Mitsuba's ``perspective`` and
 ``thinlens`` sensors. Only single scattering from particles is traced (no light paths
@@ -69,6 +81,14 @@ class ParticleTracer(mi.CppADIntegrator):
     def rays_for(self, sensor) -> int:
         return self.rays_per_particle if sensor.needs_aperture_sample() else 1
 
+    def passes_for(self, sensor, spp: int = 0) -> int:
+        """Independent passes a render with ``spp`` makes: ``spp`` (1 when 0) for a sensor
+        that draws samples, 1 for a deterministic one (every pass would be the same)."""
+        spp = int(spp)
+        if spp < 0:
+            raise ConfigError(f"particle_tracer: 'spp' must be >= 0 (0: one pass), got {spp}.")
+        return max(spp, 1) if sensor.needs_aperture_sample() else 1
+
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
@@ -77,34 +97,44 @@ class ParticleTracer(mi.CppADIntegrator):
         n_pix = float(size[0] * size[1])
         block = mi.ImageBlock(size, mi.ScalarPoint2i(0, 0), 1, film.rfilter(), False, True, False, False, False)
         rays = self.rays_for(sensor)
+        passes = self.passes_for(sensor, spp)
         splats = 0
         for k, emitter in enumerate(self.particle_emitters(scene)):
             center, radius, diameter = emitter.particle_arrays()
             n = dr.width(diameter)
             if n == 0:
                 continue
-            idx = dr.arange(mi.UInt32, n * rays)
-            pid = idx // rays
-            it = dr.zeros(mi.Interaction3f, n * rays)
-            it.p = dr.gather(mi.Point3f, center, pid)
-            it.time = mi.Float(sensor.shutter_open())
-            if rays > 1:
-                rng = mi.PCG32(size=n * rays, initstate=mi.UInt64(seed) * 0x9E3779B97F4A7C15 + k, initseq=mi.UInt64(idx))
-                sample = mi.Point2f(rng.next_float32(), rng.next_float32())
-            else:
-                sample = mi.Point2f(0.5, 0.5)
-            ds, w_sensor = sensor.sample_direction(it, sample, True)
-            active = ds.pdf > 0
-            if self.occlusion:
-                # Start outside the particle's own proxy shell (circumradius < 1.3 R).
-                skip = 1.5 * dr.gather(mi.Float, radius, pid)
-                ray = mi.Ray3f(it.p + ds.d * skip, ds.d, ds.dist - skip, it.time, it.wavelengths)
-                active &= ~scene.ray_test(ray, active)
-            intensity = emitter.intensity(it.p, dr.gather(mi.Float, diameter, pid), ds.d, it.wavelengths, active)
-            value = intensity * w_sensor[0] * (n_pix / rays)
-            block.put(ds.uv, [value], active)
-            splats += n * rays
-        self.last_stats = {"rays_per_particle": rays, "splats": splats, "occlusion": self.occlusion}
+            for pas in range(passes):
+                # Pass p draws from PCG32 sequences [p n rays, (p + 1) n rays): pass 0 is the
+                # single-pass render, and no two passes share a sequence.
+                idx = dr.arange(mi.UInt32, n * rays)
+                pid = idx // rays
+                it = dr.zeros(mi.Interaction3f, n * rays)
+                it.p = dr.gather(mi.Point3f, center, pid)
+                it.time = mi.Float(sensor.shutter_open())
+                if sensor.needs_aperture_sample():
+                    # opaque offset: every pass reuses one compiled kernel
+                    seq = mi.UInt64(idx) + dr.opaque(mi.UInt64, pas * n * rays)
+                    rng = mi.PCG32(size=n * rays, initstate=mi.UInt64(seed) * 0x9E3779B97F4A7C15 + k, initseq=seq)
+                    sample = mi.Point2f(rng.next_float32(), rng.next_float32())
+                else:
+                    sample = mi.Point2f(0.5, 0.5)
+                ds, w_sensor = sensor.sample_direction(it, sample, True)
+                active = ds.pdf > 0
+                if self.occlusion:
+                    # Start outside the particle's own proxy shell (circumradius < 1.3 R).
+                    skip = 1.5 * dr.gather(mi.Float, radius, pid)
+                    ray = mi.Ray3f(it.p + ds.d * skip, ds.d, ds.dist - skip, it.time, it.wavelengths)
+                    active &= ~scene.ray_test(ray, active)
+                intensity = emitter.intensity(it.p, dr.gather(mi.Float, diameter, pid), ds.d, it.wavelengths, active)
+                value = intensity * w_sensor[0] * (n_pix / (rays * passes))
+                block.put(ds.uv, [value], active)
+                if passes > 1:
+                    dr.eval(block.tensor())  # one pass at a time: memory of n * rays lanes
+                splats += n * rays
+        self.last_stats = {"rays_per_particle": rays, "passes": passes, "samples_per_particle": rays * passes,
+                           "spp_requested": int(spp) if spp else None, "splats": splats,
+                           "occlusion": self.occlusion}
         img = block.tensor()
         if evaluate:
             dr.eval(img)

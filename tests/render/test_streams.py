@@ -1,0 +1,117 @@
+"""Render seeds and spp: each sensor and frame of render_scene gets its own derived seed (in
+its metadata), a subset of sensors renders the same images, and the particle tracer honours
+spp (independent passes: the Monte Carlo variance falls as 1 / spp) and records what it used.
+"""
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mitpiv import streams
+from mitpiv.io import read_exr, write_particles_ply
+from mitpiv.render.render import render_scene
+from mitpiv.render.scene import load_scene
+
+from .helpers import camera, render, scene
+
+_SENSOR = """    <sensor type="distorted_pinhole" id="{sid}">
+        <float name="azimuth_deg" value="{az}"/>
+        <float name="elevation_deg" value="50"/>
+        <float name="distance_mm" value="600"/>
+        <float name="focal_length_mm" value="85"/>
+        <float name="pixel_pitch_um" value="20"/>
+        {lens}
+        <film type="hdrfilm">
+            <integer name="width" value="24"/>
+            <integer name="height" value="24"/>
+            <string name="pixel_format" value="luminance"/>
+        </film>
+    </sensor>
+"""
+THIN_LENS = '<float name="f_number" value="2"/><float name="focus_distance_mm" value="560"/>'
+
+
+def _xml(tmp_path, lens=THIN_LENS):
+    rng = np.random.default_rng(8)
+    for k in (0, 1):
+        write_particles_ply(tmp_path / f"particles_{k}.ply", rng.uniform(-1.5, 1.5, (40, 3)), 1.5, proxy_radius_mm=0.01)
+    sensors = "".join(_SENSOR.format(sid=s, az=az, lens=lens) for s, az in (("camA", 30), ("camB", -40)))
+    xml = f"""<scene version="3.0.0">
+    <default name="frame" value="0"/>
+    <integrator type="particle_tracer"><integer name="rays_per_particle" value="8"/></integrator>
+    <emitter type="laser_sheet" id="laser"><float name="thickness" value="3"/></emitter>
+    <shape type="ellipsoidsmesh">
+        <string name="filename" value="particles_$frame.ply"/>
+        <float name="extent" value="1"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
+        <emitter type="tracer_particles"><ref name="sheet" id="laser"/></emitter>
+    </shape>
+{sensors}</scene>
+"""
+    path = tmp_path / "scene.xml"
+    path.write_text(xml)
+    return path
+
+
+def test_each_sensor_and_frame_renders_with_its_own_seed(tmp_path):
+    xml = _xml(tmp_path)
+    files = render_scene(xml, out_dir=tmp_path / "all", frames=(0, 1), seed=11, progress=False)
+    metas = {(m["sensor_id"], m["frame"]): (img, m) for img, m in map(read_exr, files)}
+    seeds = {k: m["render_seed"] for k, (_, m) in metas.items()}
+    assert len(set(seeds.values())) == 4  # two sensors x two frames
+    for (sid, f), (img, m) in metas.items():
+        assert m["seed"] == 11 and m["render_seed"] == streams.render_seed(11, sid, f)
+        # the image is the scene rendered with that derived seed
+        sc = load_scene(xml, frame=f)
+        k = [s.id() for s in sc.sensors()].index(sid)
+        np.testing.assert_array_equal(img, np.array(mi.render(sc, sensor=k, seed=m["render_seed"]))[..., 0])
+    # a thin lens draws aperture samples: the two seeds give different noise
+    a = metas[("camA", 0)][0]
+    sc = load_scene(xml, frame=0)
+    assert not np.array_equal(a, np.array(mi.render(sc, sensor=0, seed=11))[..., 0])
+    # rendering one sensor alone gives the same image as in the full render
+    (only,) = render_scene(xml, out_dir=tmp_path / "one", frames=(0,), seed=11, progress=False, sensors=["camB"])
+    np.testing.assert_array_equal(read_exr(only)[0], metas[("camB", 0)][0])
+
+
+def test_spp_is_recorded_as_used(tmp_path):
+    xml = _xml(tmp_path)
+    (f,) = render_scene(xml, out_dir=tmp_path / "a", frames=(0,), seed=1, spp=4, sensors=["camA"], progress=False)
+    m = read_exr(f)[1]
+    assert m["spp"] == 4 and m["spp_requested"] == 4
+    assert m["integrator"]["passes"] == 4 and m["integrator"]["rays_per_particle"] == 8
+    assert m["integrator"]["samples_per_particle"] == 32
+    (f,) = render_scene(xml, out_dir=tmp_path / "b", frames=(0,), seed=1, sensors=["camA"], progress=False)
+    m = read_exr(f)[1]
+    assert m["spp"] == 1 and m["spp_requested"] is None and m["integrator"]["samples_per_particle"] == 8
+    # a pinhole has one direction to each particle: one exact pass whatever spp asks
+    (tmp_path / "p").mkdir()
+    xml = _xml(tmp_path / "p", lens="")
+    (f,) = render_scene(xml, out_dir=tmp_path / "c", frames=(0,), seed=1, spp=4, sensors=["camA"], progress=False)
+    m = read_exr(f)[1]
+    assert m["spp"] == 1 and m["spp_requested"] == 4 and m["integrator"]["samples_per_particle"] == 1
+    assert m["integrator"]["rays_per_particle_setting"] == 8
+
+
+def test_particle_tracer_noise_falls_as_one_over_spp(tmp_path):
+    rng = np.random.default_rng(3)
+    pts = np.column_stack([rng.uniform(-2.0, 2.0, (300, 2)), rng.uniform(-1.0, 1.0, 300)])
+    # f/4 focused at 490 mm, particles at ~500 mm: ~9 px defocus disks on a 96 px film
+    sc = scene(tmp_path, pts, cam=camera(res=(96, 96)), sensor_props={"f_number": 4.0, "focus_distance_mm": 490.0},
+               integrator={"type": "particle_tracer", "rays_per_particle": 16})
+    d2 = {}
+    for spp in (1, 16):
+        d = render(sc, spp=spp, seed=5) - render(sc, spp=spp, seed=6)  # two independent estimates
+        d2[spp] = (d**2).ravel()
+        assert sc.integrator().last_stats["passes"] == spp
+    # E[sum d^2] is proportional to 1 / (rays_per_particle * spp): the ratio is 16. Tolerance:
+    # 5 standard errors of the ratio, from the per-pixel spread of d^2 (relative errors of the
+    # two sums in quadrature).
+    rel = [np.sqrt(v.size) * v.std() / v.sum() for v in d2.values()]
+    ratio = d2[1].sum() / d2[16].sum()
+    assert ratio == pytest.approx(16.0, rel=5 * np.hypot(*rel)), (ratio, rel)
+    # unbiased: the image totals at spp 1 and 16 agree within 5 standard errors; the variance
+    # of a total is at most the sum of the pixel variances (ray counts in different pixels are
+    # negatively correlated), and a pixel's variance is E[d^2] / 2.
+    tot = [render(sc, spp=s, seed=7).sum() for s in (1, 16)]
+    assert abs(tot[0] - tot[1]) < 5 * np.sqrt((d2[1].sum() + d2[16].sum()) / 2)
