@@ -292,7 +292,7 @@ class MatchResult:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        from mitpiv.io.atomic import atomic_path
+        from mitpiv.io.figures import save_figure
 
         vox = self.voxel_mm is not None
         e = self.errors_mm / (np.asarray(self.voxel_mm) if vox else 1.0)
@@ -313,9 +313,7 @@ class MatchResult:
         fig.suptitle(f"{title}: {self.n_matched}/{self.n_truth} matched ({100 * self.detection_rate:.1f} %), "
                      f"ghosts {100 * self.ghost_fraction:.1f} %", fontsize=10)
         fig.tight_layout()
-        with atomic_path(path, suffix=".png") as tmp:
-            fig.savefig(tmp, dpi=110)
-        plt.close(fig)
+        save_figure(fig, path, dpi=110)
 
 
 def _as_positions(p, name):

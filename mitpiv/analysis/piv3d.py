@@ -20,7 +20,6 @@ around it) as the signal-to-noise measure. Windows of zero variance are flagged 
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 import time
@@ -98,45 +97,17 @@ class VectorField:
         return replace(self, u=c[..., 0].copy(), v=c[..., 1].copy(), w=c[..., 2].copy(), **changes)
 
     def save(self, path) -> Path:
-        """Write the field to ``.npz`` (atomic)."""
-        from mitpiv.io.atomic import atomic_path
+        """Write the field to ``.npz`` (atomic); see :func:`mitpiv.io.write_vector_field`."""
+        from mitpiv.io.vectors import write_vector_field
 
-        path = Path(path)
-        if path.suffix != ".npz":
-            raise ConfigError(f"VectorField.save: file name must end in .npz, got {str(path)!r}.")
-        meta = {"voxel_mm": list(self.voxel_mm), "window_vox": list(self.window_vox), "dt_s": self.dt_s,
-                "info": _jsonable(self.info)}
-        with atomic_path(path, suffix=".npz") as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez_compressed(fh, x_mm=self.x_mm, y_mm=self.y_mm, z_mm=self.z_mm, u=self.u, v=self.v, w=self.w,
-                                    snr=self.snr, peak=self.peak, valid=self.valid, outlier=self.outlier,
-                                    replaced=self.replaced, meta=json.dumps(meta))
-        return path
+        return write_vector_field(path, self)
 
     @classmethod
     def load(cls, path) -> VectorField:
-        path = Path(path)
-        if not path.is_file():
-            raise FileFormatError(f"vector field file {str(path)!r} does not exist.")
-        with np.load(path) as z:
-            if "meta" not in z or "u" not in z:
-                raise FileFormatError(f"{str(path)!r} is not a mitpiv vector field (.npz written by VectorField.save).")
-            meta = json.loads(str(z["meta"]))
-            arrs = {k: z[k] for k in ("x_mm", "y_mm", "z_mm", "u", "v", "w", "snr", "peak", "valid", "outlier", "replaced")}
-        return cls(**arrs, voxel_mm=tuple(meta["voxel_mm"]), window_vox=tuple(meta["window_vox"]), dt_s=meta["dt_s"],
-                   info=meta.get("info", {}))
+        """Read a field written by :meth:`save`; see :func:`mitpiv.io.read_vector_field`."""
+        from mitpiv.io.vectors import read_vector_field
 
-
-def _jsonable(d):
-    if isinstance(d, dict):
-        return {k: _jsonable(v) for k, v in d.items()}
-    if isinstance(d, list | tuple):
-        return [_jsonable(v) for v in d]
-    if isinstance(d, np.generic):
-        return d.item()
-    if isinstance(d, np.ndarray):
-        return d.tolist()
-    return d
+        return read_vector_field(path)
 
 
 # ---------------------------------------------------------------------------------- helpers
@@ -650,7 +621,7 @@ def plot_velocity_error(field: VectorField, result: dict, path, *, axis: str = "
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from mitpiv.io.atomic import atomic_path
+    from mitpiv.io.figures import save_figure
 
     ax_i = {"z": 0, "y": 1, "x": 2}[axis]
     err = result["error"]
@@ -669,6 +640,4 @@ def plot_velocity_error(field: VectorField, result: dict, path, *, axis: str = "
     axs[1].legend(fontsize=8)
     axs[1].set_title(f"outlier ratio {100 * result['outlier_ratio']:.2f} %, n = {result['n']}")
     fig.tight_layout()
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)

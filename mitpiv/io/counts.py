@@ -13,7 +13,8 @@ import numpy as np
 
 from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.io.atomic import atomic_path
-from mitpiv.io.exr import METADATA_KEY, _json_default
+from mitpiv.io.exr import METADATA_KEY
+from mitpiv.io.records import json_default
 
 __all__ = ["write_counts", "read_counts"]
 
@@ -41,7 +42,7 @@ def write_counts(path, counts, metadata: dict | None = None) -> Path:
         import OpenEXR
 
         try:
-            meta_json = json.dumps(metadata or {}, default=_json_default, sort_keys=True)
+            meta_json = json.dumps(metadata or {}, default=json_default, sort_keys=True)
         except (TypeError, ValueError) as e:
             raise ConfigError(f"write_counts: metadata cannot be stored as JSON: {e}.") from None
         header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage, METADATA_KEY: meta_json}

@@ -14,20 +14,11 @@ import numpy as np
 
 from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.io.atomic import atomic_path
+from mitpiv.io.records import json_default
 
 __all__ = ["write_exr", "read_exr", "METADATA_KEY"]
 
 METADATA_KEY = "mitpiv"
-
-
-def _json_default(o):
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"metadata value of type {type(o).__name__} is not JSON-serialisable")
 
 
 def write_exr(path, image, metadata: dict | None = None) -> Path:
@@ -51,7 +42,7 @@ def write_exr(path, image, metadata: dict | None = None) -> Path:
             f"non-finite pixel(s); refusing to write it."
         )
     try:
-        meta_json = json.dumps(metadata or {}, default=_json_default, sort_keys=True)
+        meta_json = json.dumps(metadata or {}, default=json_default, sort_keys=True)
     except (TypeError, ValueError) as e:
         raise ConfigError(f"write_exr: metadata cannot be stored as JSON: {e}.") from None
     if img.ndim == 2:

@@ -20,7 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from mitpiv.errors import ConfigError, FileFormatError, check_positive
+from mitpiv.io.arrays import json_entry, read_npz, write_npz
 from mitpiv.io.atomic import atomic_path
+from mitpiv.io.records import to_jsonable
 
 __all__ = ["write_particles_ply", "read_particles_ply", "write_truth", "read_truth", "PLY_FIELDS"]
 
@@ -113,13 +115,32 @@ def read_particles_ply(path) -> dict:
     }
 
 
-def write_truth(path, *, positions_mm, times_s, diameters_um, flow: dict | None = None, extra: dict | None = None) -> Path:
-    """Write ground truth for F frames of N particles (atomic).
+def write_truth(path, *, positions_mm, times_s, diameters_um, velocities_mm_s=None, flow: dict | None = None,
+                extra: dict | None = None) -> Path:
+    """Write ground truth for F frames of N particles (atomic): the one truth format of
+    every experiment kind (particle images and backlit droplets).
 
-    ``.npz``: arrays ``positions_mm`` (F, N, 3), ``times_s`` (F,), ``diameters_um`` (N,),
-    ``displacements_mm`` (F-1, N, 3) between consecutive frames, and JSON ``flow``/``extra``.
-    ``.csv``: one row per particle with positions of every frame and the displacement
-    from the first to the last frame.
+    Parameters
+    ----------
+    path : str or Path
+        ``.npz`` (the format :func:`read_truth` reads) or ``.csv`` (for other software).
+    positions_mm : (F, N, 3) array
+        Particle centres in every frame [mm].
+    times_s : (F,) array
+        Frame times [s].
+    diameters_um : (N,) array or float
+        Physical diameters [um] (micrometres also for millimetre droplets: convert once
+        at the boundary, ``diameters_mm * 1e3``).
+    velocities_mm_s : (N, 3) array, optional
+        Per-particle velocity [mm/s] (e.g. ballistic droplets); stored when given.
+    flow, extra : dict, optional
+        JSON metadata (the flow model, the seeding, ...).
+
+    ``.npz`` entries: ``positions_mm`` (F, N, 3), ``times_s`` (F,), ``diameters_um`` (N,),
+    ``displacements_mm`` (F-1, N, 3) between consecutive frames, ``velocities_mm_s``
+    (N, 3) when given, and JSON ``flow``/``extra``. ``.csv``: one row per particle with
+    the diameter, the positions of every frame, the velocity (when given) and the
+    displacement from the first to the last frame (the last three columns).
     """
     pos = np.asarray(positions_mm, dtype=np.float64)
     if pos.ndim != 3 or pos.shape[2] != 3:
@@ -127,20 +148,23 @@ def write_truth(path, *, positions_mm, times_s, diameters_um, flow: dict | None 
     times = np.asarray(times_s, dtype=np.float64).reshape(-1)
     if times.shape[0] != pos.shape[0]:
         raise ConfigError(f"write_truth: {pos.shape[0]} frames but {times.shape[0]} times.")
-    diam = np.broadcast_to(np.asarray(diameters_um, dtype=np.float64), (pos.shape[1],))
+    try:
+        diam = np.broadcast_to(np.asarray(diameters_um, dtype=np.float64), (pos.shape[1],))
+    except ValueError:
+        raise ConfigError(f"write_truth: diameters_um must be one value or one per particle ({pos.shape[1]}), got "
+                          f"shape {np.shape(diameters_um)}.") from None
+    vel = None
+    if velocities_mm_s is not None:
+        vel = np.asarray(velocities_mm_s, dtype=np.float64)
+        if vel.shape != (pos.shape[1], 3):
+            raise ConfigError(f"write_truth: velocities_mm_s must have shape (N, 3) = ({pos.shape[1]}, 3) [mm/s], got "
+                              f"{vel.shape}.")
     path = Path(path)
     if path.suffix == ".npz":
-        with atomic_path(path, suffix=".npz") as tmp:
-            with open(tmp, "wb") as f:
-                np.savez_compressed(
-                    f,
-                    positions_mm=pos,
-                    times_s=times,
-                    diameters_um=diam,
-                    displacements_mm=np.diff(pos, axis=0),
-                    flow=json.dumps(flow or {}),
-                    extra=json.dumps(extra or {}),
-                )
+        write_npz(path, {"positions_mm": pos, "times_s": times, "diameters_um": diam,
+                         "displacements_mm": np.diff(pos, axis=0), "velocities_mm_s": vel,
+                         "flow": json.dumps(to_jsonable(flow or {})), "extra": json.dumps(to_jsonable(extra or {}))},
+                  owner="write_truth")
     elif path.suffix == ".csv":
         with atomic_path(path, suffix=".csv") as tmp:
             with open(tmp, "w", newline="") as f:
@@ -148,10 +172,13 @@ def write_truth(path, *, positions_mm, times_s, diameters_um, flow: dict | None 
                 cols = ["id", "diameter_um"]
                 for k in range(pos.shape[0]):
                     cols += [f"x{k}_mm", f"y{k}_mm", f"z{k}_mm"]
+                if vel is not None:
+                    cols += ["vx_mm_s", "vy_mm_s", "vz_mm_s"]
                 cols += ["dx_mm", "dy_mm", "dz_mm"]
                 w.writerow(cols)
                 disp = pos[-1] - pos[0]
-                rows = np.column_stack([np.arange(pos.shape[1]), diam, *[pos[k] for k in range(pos.shape[0])], disp])
+                parts = [np.arange(pos.shape[1]), diam, *[pos[k] for k in range(pos.shape[0])]]
+                rows = np.column_stack([*parts, *([] if vel is None else [vel]), disp])
                 for row in rows:
                     w.writerow([int(row[0])] + [repr(float(v)) for v in row[1:]])
     else:
@@ -160,12 +187,29 @@ def write_truth(path, *, positions_mm, times_s, diameters_um, flow: dict | None 
 
 
 def read_truth(path) -> dict:
-    """Read an NPZ truth file written by :func:`write_truth`."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileFormatError(f"truth file {str(path)!r} does not exist.")
-    with np.load(path) as z:
-        out = {k: z[k] for k in ("positions_mm", "times_s", "diameters_um", "displacements_mm")}
-        out["flow"] = json.loads(str(z["flow"]))
-        out["extra"] = json.loads(str(z["extra"]))
-    return out
+    """Read an NPZ truth file written by :func:`write_truth`.
+
+    Returns a dict with ``positions_mm`` (F, N, 3), ``times_s`` (F,), ``diameters_um``
+    (N,), ``displacements_mm`` (F-1, N, 3), ``velocities_mm_s`` ((N, 3) or None when not
+    stored), ``flow`` and ``extra`` (dicts).
+
+    Truth files of earlier backlit runs (``diameters_mm``, ``velocities_mm_s``, no
+    displacements or metadata) read too: their diameters are converted to micrometres.
+    Raises :class:`FileFormatError` naming the file when it is missing or not a truth file.
+    """
+    z = read_npz(path, what="truth", required=("positions_mm", "times_s"))
+    if "diameters_um" in z:
+        diam_um = z["diameters_um"]
+    elif "diameters_mm" in z:  # backlit runs before the one truth format
+        diam_um = np.asarray(z["diameters_mm"], dtype=np.float64) * 1e3
+    else:
+        raise FileFormatError(f"{str(path)!r} is not a truth file: it has neither 'diameters_um' nor 'diameters_mm' "
+                              f"(it holds {sorted(z)}).")
+    pos = z["positions_mm"]
+    if pos.ndim != 3 or pos.shape[2] != 3 or diam_um.shape != (pos.shape[1],):
+        raise FileFormatError(f"truth file {str(path)!r}: positions_mm {pos.shape} and diameters {diam_um.shape} do "
+                              f"not describe F frames of N particles ((F, N, 3) and (N,)).")
+    return {"positions_mm": pos, "times_s": z["times_s"], "diameters_um": diam_um,
+            "displacements_mm": z["displacements_mm"] if "displacements_mm" in z else np.diff(pos, axis=0),
+            "velocities_mm_s": z.get("velocities_mm_s"),
+            "flow": json_entry(z, "flow", path, default={}), "extra": json_entry(z, "extra", path, default={})}

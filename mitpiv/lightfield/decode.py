@@ -74,35 +74,17 @@ class LightField:
         return self.data.transpose(0, 2, 1, 3).reshape(nv * nt, nu * ns)
 
     def save(self, path) -> Path:
-        """Write the light field to a ``.npz`` file (atomic), with its optics and decode info."""
-        import json
+        """Write the light field to a ``.npz`` file (atomic); see :func:`mitpiv.io.write_lightfield`."""
+        from mitpiv.io.lightfield import write_lightfield
 
-        from mitpiv.io.atomic import atomic_path
-
-        path = Path(path)
-        if path.suffix != ".npz":
-            raise ConfigError(f"LightField.save: the file must end in .npz, got {str(path)!r}.")
-        with atomic_path(path, suffix=".npz") as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, data=self.data, s_px=self.s_px, t_px=self.t_px, du_px=self.du_px,
-                         view_weights=self.view_weights, valid=self.valid,
-                         optics=json.dumps(None if self.optics is None else self.optics.to_dict()),
-                         info=json.dumps(self.info))
-        return path
+        return write_lightfield(path, self)
 
     @classmethod
     def load(cls, path) -> LightField:
-        import json
+        """Read a light field written by :meth:`save`; see :func:`mitpiv.io.read_lightfield`."""
+        from mitpiv.io.lightfield import read_lightfield
 
-        from mitpiv.errors import FileFormatError
-
-        try:
-            with np.load(path) as z:
-                optics = json.loads(str(z["optics"]))
-                return cls(z["data"], z["s_px"], z["t_px"], z["du_px"], z["view_weights"], z["valid"],
-                           None if optics is None else PlenopticCamera.from_dict(optics), json.loads(str(z["info"])))
-        except (OSError, KeyError, ValueError) as e:
-            raise FileFormatError(f"LightField.load: {str(path)!r} is not a mitpiv light field ({e}).") from None
+        return read_lightfield(path)
 
     def _need_optics(self, what: str) -> PlenopticCamera:
         if self.optics is None:

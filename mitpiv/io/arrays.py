@@ -1,0 +1,86 @@
+"""Named NumPy arrays in ``.npz`` files, written atomically and read with errors that name
+the file: the container of the light-field, vector-field, truth, volume and backlit formats,
+and of a study's own arrays (match pairs, tracks)."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from mitpiv.errors import ConfigError, FileFormatError
+from mitpiv.io.atomic import atomic_path
+
+__all__ = ["write_npz", "read_npz"]
+
+
+def write_npz(path, arrays: dict, *, compressed: bool = True, owner: str = "write_npz") -> Path:
+    """Write named arrays to ``path`` (``.npz``, atomic).
+
+    Parameters
+    ----------
+    path : str or Path
+        Target file; must end in ``.npz``.
+    arrays : dict of str -> array_like or str
+        The entries. ``None`` values are left out (optional entries); a ``str`` is stored
+        as a 0-d string array (JSON metadata). Object arrays are refused (they would need
+        pickle to read back).
+    compressed : bool
+        ``np.savez_compressed`` (default) or ``np.savez`` (large float data where the
+        compression costs more time than it saves).
+    owner : str
+        The public function named in error messages.
+    """
+    path = Path(path)
+    if path.suffix != ".npz":
+        raise ConfigError(f"{owner}: the file name must end in .npz, got {str(path)!r}.")
+    entries = {}
+    for key, value in arrays.items():
+        if value is None:
+            continue
+        a = np.asarray(value)
+        if a.dtype == object:
+            raise ConfigError(f"{owner}: entry {key!r} for {str(path)!r} is not a numeric or string array "
+                              f"(dtype object); give a NumPy array or a JSON string.")
+        entries[key] = a
+    save = np.savez_compressed if compressed else np.savez
+    with atomic_path(path, suffix=".npz") as tmp:
+        with open(tmp, "wb") as fh:
+            save(fh, **entries)
+    return path
+
+
+def read_npz(path, *, what: str = "array file", required=()) -> dict:
+    """All arrays of an ``.npz`` file, as a dict (loaded into memory).
+
+    Raises :class:`FileFormatError` naming the file when it does not exist, is not an
+    ``.npz`` archive readable without pickle, or lacks one of the ``required`` entries.
+    ``what`` names the format in the message (e.g. ``"mitpiv light field"``).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileFormatError(f"{what} file {str(path)!r} does not exist.")
+    try:
+        z = np.load(path, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            raise ValueError("it holds a single array, not named arrays")
+        with z:
+            out = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise FileFormatError(f"{str(path)!r} is not a {what} (.npz) file ({e}).") from None
+    missing = [k for k in required if k not in out]
+    if missing:
+        raise FileFormatError(f"{str(path)!r} is not a {what} file: it lacks {missing} (it holds {sorted(out)}).")
+    return out
+
+
+def json_entry(arrays: dict, key: str, path, *, default=None):
+    """Parse the JSON string entry ``key`` of :func:`read_npz`'s result (``default`` when absent)."""
+    if key not in arrays:
+        return default
+    try:
+        return json.loads(str(arrays[key]))
+    except json.JSONDecodeError as e:
+        raise FileFormatError(f"{str(path)!r}: entry {key!r} is not valid JSON ({e}).") from None
