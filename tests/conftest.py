@@ -1,5 +1,22 @@
-"""Test-suite settings: progress bars off (tests run silent)."""
+"""Test-suite settings: progress bars off (tests run silent), and the Mitsuba variant selected
+once for the whole session.
+
+Importing mitpiv selects no variant (the first render does, see
+:func:`mitpiv.render.variant.ensure_variant`), but many tests build Mitsuba values
+(``mi.ScalarTransform4f``, ``mi.load_dict``) themselves, some at module level, so the
+variant is chosen here before collection: the same default a first render would pick
+(``$MITPIV_VARIANT``, else ``cuda_ad_mono`` when a CUDA device works, else
+``llvm_ad_mono``). The lazy path itself is tested in fresh interpreters
+(tests/render/test_variant.py).
+"""
 
 import os
 
 os.environ.setdefault("MITPIV_QUIET", "1")
+
+import mitpiv  # noqa: E402
+
+try:
+    mitpiv.set_variant()
+except mitpiv.BackendError:  # pragma: no cover - no rendering backend on this machine
+    pass  # the NumPy tests still run; every rendering test fails with this error (ensure_variant raises it)

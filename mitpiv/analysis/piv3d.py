@@ -20,8 +20,8 @@ around it) as the signal-to-noise measure. Windows of zero variance are flagged 
 
 from __future__ import annotations
 
+import logging
 import math
-import sys
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -30,6 +30,9 @@ import numpy as np
 
 from mitpiv.analysis.particles import gauss3_offset as _gauss3
 from mitpiv.errors import ConfigError, FileFormatError, check_positive
+from mitpiv.progress import Progress, track
+
+log = logging.getLogger(__name__)
 
 REPLACE_METHODS = ("median", "interpolation")
 
@@ -299,11 +302,6 @@ def _correlate(a, b, normalised, width):
     return disp, np.where(valid, c, 0.0), snr, valid
 
 
-def _progress(progress, msg):
-    if progress:
-        print(msg, file=sys.stderr, flush=True)
-
-
 # ---------------------------------------------------------------------------------- piv3d
 
 
@@ -325,7 +323,7 @@ def _smooth_predictor(d, step, window, kind):
 def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: bool = True,
           interpolation: str = "cubic", normalised: bool = False, validate: bool = True, threshold: float = 2.0,
           epsilon: float = 0.1, replace: str | None = "median", width: int = 2, dt_s: float | None = None,
-          smooth: str | None = "gaussian", chunk_mb: float = 256.0, progress: bool = False) -> VectorField:
+          smooth: str | None = "gaussian", chunk_mb: float = 256.0, progress: Progress = None) -> VectorField:
     """Multi-pass 3D cross-correlation PIV between two volumes on ``grid``.
 
     windows : window edge per pass, a sequence with one entry per pass (``(64, 48, 32)``:
@@ -346,6 +344,7 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
         field keeps its outlier flags and is replaced only when ``replace`` is given.
     width : half-size of the box around the primary peak excluded from the second peak.
     dt_s : when given, u, v, w are velocities [mm/s]; else displacements [mm].
+    progress : one step per pass (None, True or a callable; see :mod:`mitpiv.progress`).
     """
     a = grid.check_volume(vol_a, "vol_a").astype(np.float32, copy=False)
     b = grid.check_volume(vol_b, "vol_b").astype(np.float32, copy=False)
@@ -372,7 +371,7 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
     t0 = time.perf_counter()
     timings = []
     fld = None
-    for p, (w, step) in enumerate(passes):
+    for p, (w, step) in enumerate(track(passes, desc="piv3d: passes", progress=progress, unit="pass")):
         tp = time.perf_counter()
         sx, cx = _lattice(nx, w[0], step[0])
         sy, cy = _lattice(ny, w[1], step[1])
@@ -426,8 +425,8 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
         elif not last:
             fld = _fill_invalid(fld)
         timings.append(time.perf_counter() - tp)
-        _progress(progress, f"piv3d: pass {p + 1}/{len(passes)} window {w} step {step}: {n} vectors, "
-                            f"{int((~valid).sum())} invalid, {int(fld.outlier.sum())} outliers, {timings[-1]:.1f} s")
+        log.debug("piv3d: pass %d/%d window %s step %s: %d vectors, %d invalid, %d outliers, %.1f s", p + 1,
+                  len(passes), w, step, n, int((~valid).sum()), int(fld.outlier.sum()), timings[-1])
         pred_next = fld.displacement_vox()
         if smooth and not last:
             pred_next = _smooth_predictor(pred_next, step, w, smooth)
@@ -436,6 +435,8 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
                      "interpolation": interpolation, "normalised": bool(normalised), "seconds": time.perf_counter() - t0,
                      "pass_seconds": timings, "outlier_ratio": fld.outlier_ratio,
                      "invalid": int((~fld.valid).sum())})
+    log.info("piv3d: %d passes, %d vectors, %.1f %% outliers, %d invalid, %.1f s", len(passes), fld.valid.size,
+             100 * fld.outlier_ratio, fld.info["invalid"], fld.info["seconds"])
     return fld
 
 

@@ -23,8 +23,8 @@ inverse FFT per plane. :func:`detect` applies the hybrid detection of backlit im
 
 from __future__ import annotations
 
+import logging
 import math
-import sys
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -32,9 +32,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mitpiv.errors import ConfigError, MitpivWarning, check_positive
+from mitpiv.progress import Progress, track
 
 __all__ = ["Hologram", "record", "propagate", "focal_stack", "iter_planes", "transfer_function", "detect",
            "depth_of_focus_mm", "critical_distance_mm"]
+
+log = logging.getLogger(__name__)
 
 
 def _wl_mm(wavelength_nm):
@@ -171,7 +174,7 @@ def _disk_transmittance(shape, x0, y0, dx, centres, radii, phase_index, wl, batc
 def record(particles, diameters_mm=None, *, sensor_z_mm: float, wavelength_nm: float = 532.0, pixel_um: float = 5.5,
            resolution=(1024, 1024), centre_xy_mm=(0.0, 0.0), oversample: int = 2, guard_mm: float | None = None,
            phase_index: float | None = None, plane_tolerance_mm: float = 0.0, sensor=None, seed: int = 0,
-           progress: bool = False) -> Hologram:
+           progress: Progress = None) -> Hologram:
     """Record the in-line hologram of a particle field.
 
     particles : (N, 3) positions [mm] (with ``diameters_mm``) or a dict with
@@ -238,20 +241,20 @@ def record(particles, diameters_mm=None, *, sensor_z_mm: float, wavelength_nm: f
     groups = np.split(np.arange(pos.shape[0]), brk) if pos.shape[0] else []
     t0 = time.perf_counter()
     z_here = None
-    for gi, idx in enumerate(groups):
+    for idx in track(groups, desc="hologram: planes", progress=progress, unit="plane"):
         zp = float(pos[idx, 2].mean())
         if z_here is not None:
             u = propagate(u, zp - z_here, pixel_um=dx * 1e3, wavelength_nm=wavelength_nm, pad=False)
         u *= _disk_transmittance((ny, nx), x0, y0, dx, pos[idx, :2], d[idx] / 2, phase_index, wl)
         z_here = zp
-        if progress and ((gi + 1) % max(len(groups) // 10, 1) == 0 or gi + 1 == len(groups)):
-            print(f"hologram: plane {gi + 1}/{len(groups)}, {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
     if z_here is not None:
         u = propagate(u, zs - z_here, pixel_um=dx * 1e3, wavelength_nm=wavelength_nm, pad=False)
     inten = np.abs(u[g:g + H * oversample, g:g + W * oversample]) ** 2
     img = inten.reshape(H, oversample, W, oversample).mean(axis=(1, 3))
     info = {"planes": len(groups), "grid": [nx, ny], "guard_mm": g * dx, "oversample": int(oversample),
             "critical_distance_mm": zc, "seconds": time.perf_counter() - t0, "n_particles": int(pos.shape[0])}
+    log.debug("record: %d particles in %d planes on a %dx%d grid, %.1f s", info["n_particles"], len(groups), nx, ny,
+              info["seconds"])
     background = 1.0
     if sensor is not None:
         from mitpiv.imaging import SensorModel, apply_sensor
@@ -316,7 +319,7 @@ def iter_planes(hologram, z_mm, *, pixel_um=None, wavelength_nm=None, background
 
 
 def focal_stack(hologram, z_mm, *, pixel_um=None, wavelength_nm=None, background=None, pad: bool = False,
-                out=None, progress: bool = False) -> np.ndarray:
+                out=None, progress: Progress = None) -> np.ndarray:
     """Amplitude of the hologram reconstructed at each distance ``z_mm`` from the sensor:
     (n_z, H, W) float32 (1 = background). ``out``: stream into this ``.npy`` file (memory
     map) for stacks larger than memory."""
@@ -325,15 +328,11 @@ def focal_stack(hologram, z_mm, *, pixel_um=None, wavelength_nm=None, background
     img = hologram.image if isinstance(hologram, Hologram) else np.asarray(hologram)
     z = np.atleast_1d(np.asarray(z_mm, dtype=np.float64))
     t0 = time.perf_counter()
-    step = max(z.size // 20, 1)
     with _output((z.size,) + tuple(img.shape), out, "focal_stack") as stack:
-        for k, plane in iter_planes(hologram, z, pixel_um=pixel_um, wavelength_nm=wavelength_nm, background=background,
-                                    pad=pad):
+        planes = iter_planes(hologram, z, pixel_um=pixel_um, wavelength_nm=wavelength_nm, background=background, pad=pad)
+        for k, plane in track(planes, total=z.size, desc="hologram focal stack: planes", progress=progress, unit="plane"):
             stack[k] = np.abs(plane)
-            if progress and ((k + 1) % step == 0 or k + 1 == z.size):
-                el = time.perf_counter() - t0
-                print(f"hologram focal stack: {k + 1}/{z.size} planes, {el / (k + 1) * 1e3:.1f} ms/plane", file=sys.stderr,
-                      flush=True)
+        log.debug("hologram focal stack: %d planes, %.1f ms/plane", z.size, (time.perf_counter() - t0) / z.size * 1e3)
         result = stack if out is None else None
     return result if out is None else np.load(out, mmap_mode="r")
 

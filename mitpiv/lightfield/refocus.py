@@ -19,8 +19,8 @@ estimated from a few views. The kernels run in parallel over output rows (Numba)
 
 from __future__ import annotations
 
+import logging
 import math
-import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -32,8 +32,11 @@ from mitpiv.errors import ConfigError
 from mitpiv.io.atomic import atomic_path
 from mitpiv.lightfield.decode import LightField
 from mitpiv.lightfield.geometry import alpha_from_z, z_from_alpha
+from mitpiv.progress import Progress, track
 
 __all__ = ["refocus", "focal_stack", "refocus_volume", "grid_steps", "METHODS"]
+
+log = logging.getLogger(__name__)
 
 METHODS = ("additive", "multiplicative")
 _MAX_IN_MEMORY = 2 * 1024**3  # bytes: larger stacks must stream to a file
@@ -261,7 +264,7 @@ def refocus(lf: LightField, alpha: float, *, method: str = "additive", magnifica
 
 def focal_stack(lf: LightField, z_mm, *, method: str = "additive", magnification: str = "natural", weights=None,
                 interpolation: str = "linear", min_view_fraction: float = 0.5, out=None,
-                progress: bool = False) -> np.ndarray:
+                progress: Progress = None) -> np.ndarray:
     """Refocused images at depths ``z_mm`` from the focal plane (positive = farther).
 
     Parameters
@@ -272,8 +275,8 @@ def focal_stack(lf: LightField, z_mm, *, method: str = "additive", magnification
     out : path, optional
         Stream the planes into this ``.npy`` file (memory-mapped; the stack never has to
         fit in memory) and return the memory map. Stacks over 2 GiB require it.
-    progress : bool
-        Print a progress line per 5 % of the planes to stderr.
+    progress : None, bool or callable
+        One step per plane (desc ``"focal stack: planes"``); see :mod:`mitpiv.progress`.
 
     Returns
     -------
@@ -289,21 +292,21 @@ def focal_stack(lf: LightField, z_mm, *, method: str = "additive", magnification
     shape = (len(z), len(lf.t_px), len(lf.s_px))
     kern = _kernels()["plane"]
     t0 = time.perf_counter()
-    step = max(len(z) // 20, 1)
     with _output(shape, out, "focal_stack") as stack:
-        for k, (zk, ak) in enumerate(zip(z, alphas, strict=True)):
+        planes = track(enumerate(zip(z, alphas, strict=True)), total=len(z), desc="focal stack: planes",
+                       progress=progress, unit="plane")
+        for k, (zk, ak) in planes:
             base_s, base_t, sh_u, sh_v = _plane_geometry(lf, float(ak), magnification, float(zk))
             kern(lf.data, w, base_s, base_t, sh_u, sh_v, method == "multiplicative", interpolation == "nearest",
                  _wmin(w, min_view_fraction), stack[k])
-            if progress and ((k + 1) % step == 0 or k + 1 == len(z)):
-                el = time.perf_counter() - t0
-                print(f"focal stack: {k + 1}/{len(z)} planes, {el:.1f} s, {el / (k + 1) * 1e3:.1f} ms/plane", file=sys.stderr, flush=True)
+        el = time.perf_counter() - t0
+        log.debug("focal stack: %d planes in %.1f s, %.1f ms/plane", len(z), el, el / len(z) * 1e3)
         result = stack if out is None else None
     return result if out is None else np.load(out, mmap_mode="r")
 
 
 def refocus_volume(lf: LightField, x_mm, y_mm, z_mm, *, method: str = "additive", weights=None,
-                   min_view_fraction: float = 0.5, out=None, progress: bool = False) -> np.ndarray:
+                   min_view_fraction: float = 0.5, out=None, progress: Progress = None) -> np.ndarray:
     """Refocus directly onto a world voxel grid (any camera pose).
 
     For each voxel centre ``(x, y, z)`` (world mm) and each view, the ray from the view's
@@ -328,7 +331,7 @@ def refocus_volume(lf: LightField, x_mm, y_mm, z_mm, *, method: str = "additive"
     kern = _kernels()["points"]
     yy, xx = np.meshgrid(ys, xs, indexing="ij")
     with _output(shape, out, "refocus_volume") as stack:
-        for k, zw in enumerate(zs):
+        for k, zw in enumerate(track(zs, desc="refocus_volume: planes", progress=progress, unit="plane")):
             loc = o.world_to_local(np.stack([xx, yy, np.full_like(xx, zw)], axis=-1).reshape(-1, 3))
             if np.any(loc[:, 2] <= f):
                 raise ConfigError(f"refocus_volume: voxels at z = {zw} mm lie within the focal length of the main lens "
@@ -340,7 +343,5 @@ def refocus_volume(lf: LightField, x_mm, y_mm, z_mm, *, method: str = "additive"
             kern(lf.data, w, bs, bt, gamma * sc / ds, gamma * sc / dt, a, a, method == "multiplicative",
                  _wmin(w, min_view_fraction), res)
             stack[k] = res.reshape(len(ys), len(xs))
-            if progress:
-                print(f"refocus_volume: plane {k + 1}/{len(zs)}", file=sys.stderr, flush=True)
         result = stack if out is None else None
     return result if out is None else np.load(out, mmap_mode="r")

@@ -9,6 +9,7 @@ import numpy as np
 
 from mitpiv.errors import ConfigError
 from mitpiv.grid import VoxelGrid
+from mitpiv.progress import Progress
 from mitpiv.reconstruct.tomo import TOMO_METHODS, reconstruct_volume
 
 RECONSTRUCT_METHODS = TOMO_METHODS + ("plenoptic", "drt-mart")
@@ -18,7 +19,7 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
                        mu: float = 1.0, weights: str = "circle", interpolation: str = "linear",
                        preprocess: float | None = None, combine: str = "multiplicative", threshold_k: float | None = 3.0,
                        rays_per_pixel: int = 16, fuse_normalise: str = "histogram",
-                       progress: bool = False) -> tuple[np.ndarray, dict]:
+                       progress: Progress = None) -> tuple[np.ndarray, dict]:
     """Reconstruct a volume from the images of one frame and their EXR metadata.
 
     method : one of :data:`RECONSTRUCT_METHODS`. "plenoptic": each raw image decoded (its
@@ -26,6 +27,8 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
         ``grid`` (``combine``: additive or multiplicative), the volumes of several cameras
         fused (:func:`~mitpiv.reconstruct.fuse`, ``fuse_normalise``); "drt-mart": one raw
         image, dense-ray-tracing MART. Other methods: :func:`reconstruct_volume`.
+    progress : None, bool or callable
+        Passed to the method (planes, iterations); see :mod:`mitpiv.progress`.
 
     Returns (volume, info).
     """

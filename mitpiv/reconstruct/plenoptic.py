@@ -14,8 +14,8 @@ dense-ray-tracing MART (DRT-MART) from a raw light-field image.
 
 from __future__ import annotations
 
+import logging
 import math
-import sys
 import time
 
 import numpy as np
@@ -25,6 +25,7 @@ from mitpiv.grid import VoxelGrid
 from mitpiv.lightfield.decode import LightField
 from mitpiv.lightfield.refocus import refocus_volume
 from mitpiv.physics.plenoptic import PlenopticCamera
+from mitpiv.progress import Progress, bar, track
 from mitpiv.reconstruct._kernels import kernels
 from mitpiv.reconstruct.tomo import check_iterations
 
@@ -32,9 +33,11 @@ __all__ = ["plenoptic_volume", "fuse", "drt_weights", "drt_mart", "FUSE_NORMALIS
 
 FUSE_NORMALISATIONS = ("histogram", "max", "none")
 
+log = logging.getLogger(__name__)
+
 
 def plenoptic_volume(lf: LightField, grid: VoxelGrid, *, method: str = "additive", weights=None,
-                     exponent: float = 1.0, min_view_fraction: float = 0.5, progress: bool = False) -> np.ndarray:
+                     exponent: float = 1.0, min_view_fraction: float = 0.5, progress: Progress = None) -> np.ndarray:
     """Volumetric refocus of one plenoptic camera's light field onto ``grid``.
 
     Parameters
@@ -119,7 +122,7 @@ def _check_camera(camera, what):
 
 
 def drt_weights(camera: PlenopticCamera, grid: VoxelGrid, *, rays_per_pixel: int = 16, substeps: int = 2,
-                pixels=None, seed: int = 0, chunk_pixels: int = 2048, progress: bool = False):
+                pixels=None, seed: int = 0, chunk_pixels: int = 2048, progress: Progress = None):
     """Dense-ray-tracing weights of a plenoptic camera: ``scipy.sparse.csr_matrix`` (pixels x voxels).
 
     Entry ``(i, j)``: the fraction of pixel ``i``'s ``rays_per_pixel`` rays (uniform over
@@ -152,6 +155,7 @@ def drt_weights(camera: PlenopticCamera, grid: VoxelGrid, *, rays_per_pixel: int
     keys, vals = [], []
     share = 1.0 / (rays_per_pixel * substeps)
     t0 = time.perf_counter()
+    pbar = bar(len(pix), desc="drt_weights: pixels", progress=progress, unit="px")
     for s in range(0, len(pix), chunk_pixels):
         pc = pix[s : s + chunk_pixels]
         uv = np.stack([pc % w, pc // w], -1)[:, None, :] + rng.random((len(pc), rays_per_pixel, 2))
@@ -171,9 +175,9 @@ def drt_weights(camera: PlenopticCamera, grid: VoxelGrid, *, rays_per_pixel: int
         uk, cnt = np.unique(key, return_counts=True)
         keys.append(uk)
         vals.append((cnt * share).astype(np.float32))
-        if progress and ((s // chunk_pixels) % 20 == 19 or s + chunk_pixels >= len(pix)):
-            print(f"drt_weights: {min(s + chunk_pixels, len(pix))}/{len(pix)} pixels, {time.perf_counter() - t0:.1f} s",
-                  file=sys.stderr, flush=True)
+        pbar.update(len(pc))
+    pbar.close()
+    log.debug("drt_weights: %d pixels traced in %.1f s", len(pix), time.perf_counter() - t0)
     key = np.concatenate(keys) if keys else np.zeros(0, np.int64)
     val = np.concatenate(vals) if vals else np.zeros(0, np.float32)
     order = np.argsort(key, kind="stable")  # chunks may interleave when 'pixels' is unsorted
@@ -186,7 +190,7 @@ def drt_weights(camera: PlenopticCamera, grid: VoxelGrid, *, rays_per_pixel: int
 
 def drt_mart(raw, camera: PlenopticCamera, grid: VoxelGrid, *, iterations: int = 5, mu: float = 1.0,
              rays_per_pixel: int = 16, substeps: int = 2, prune_fraction: float | None = 0.5, dark_floor: float = 1e-3,
-             matrix=None, seed: int = 0, progress: bool = False, return_info: bool = False):
+             matrix=None, seed: int = 0, progress: Progress = None, return_info: bool = False):
     """Dense-ray-tracing MART of one raw plenoptic image.
 
     Parameters
@@ -254,11 +258,11 @@ def drt_mart(raw, camera: PlenopticCamera, grid: VoxelGrid, *, iterations: int =
     vol = np.ones(len(live))
     k = kernels()
     t1 = time.perf_counter()
-    for it in range(iterations):
+    for _ in track(range(iterations), desc="drt_mart: iterations", progress=progress):
         k["mart_sequential"](indptr, indices, data, flat, vol, float(mu))
-        if progress:
-            print(f"drt_mart: iteration {it + 1}/{iterations}, {time.perf_counter() - t1:.1f} s", file=sys.stderr, flush=True)
     t_iter = time.perf_counter() - t1
+    log.info("drt_mart: %d active voxels of %d seen, weights %.1f s, %d iterations %.1f s", len(live), len(seen),
+             t_weights, iterations, t_iter)
     out = np.zeros(grid.n_voxels, np.float32)
     out[live] = vol
     out = out.reshape(grid.shape)

@@ -26,8 +26,8 @@ as a CSR matrix (pixels x active voxels, float32).
 
 from __future__ import annotations
 
+import logging
 import math
-import sys
 import time
 import warnings
 
@@ -37,10 +37,13 @@ from scipy import ndimage
 from mitpiv.errors import ConfigError, MitpivWarning
 from mitpiv.grid import VoxelGrid
 from mitpiv.physics.camera import PinholeCamera
+from mitpiv.progress import Progress, track
 from mitpiv.reconstruct._kernels import CIRCLE, GAUSSIAN, PIXEL_RADIUS, kernels
 from mitpiv.reconstruct.mapping import CameraMapping, PinholeMapping, mapping_from_metadata
 
 __all__ = ["mlos", "mart", "sapiv_refocus", "preprocess_images", "voxel_weights", "INTERPOLATIONS", "WEIGHT_MODELS"]
+
+log = logging.getLogger(__name__)
 
 INTERPOLATIONS = ("linear", "cubic")
 WEIGHT_MODELS = ("circle", "gaussian")
@@ -206,18 +209,17 @@ def _combine(samples, inside, method, exponent):
     return np.exp(exponent * lg.sum(axis=0))
 
 
-def _volume_by_planes(imgs, maps, grid, interpolation, method, exponent, per_plane=None, progress=False, what=""):
+def _volume_by_planes(imgs, maps, grid, interpolation, method, exponent, per_plane=None, progress=None, what=""):
     samplers = [_sampler(im, interpolation) for im in imgs]
     out = np.empty(grid.shape, np.float32)
     t0 = time.perf_counter()
-    for k in range(grid.shape[0]):
+    for k in track(range(grid.shape[0]), desc=f"{what}: planes", progress=progress, unit="plane"):
         uvs = _plane_projections(maps, grid, k)
         inside = np.stack([_inside(uv, im) for uv, im in zip(uvs, imgs, strict=True)])
         val = _combine([f(uv) for f, uv in zip(samplers, uvs, strict=True)], inside, method, exponent)
         plane = val.reshape(grid.shape[1:])
         out[k] = per_plane(plane) if per_plane else plane
-        if progress and ((k + 1) % max(grid.shape[0] // 10, 1) == 0 or k + 1 == grid.shape[0]):
-            print(f"{what}: plane {k + 1}/{grid.shape[0]}, {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+    log.debug("%s: %d planes in %.1f s", what, grid.shape[0], time.perf_counter() - t0)
     return out
 
 
@@ -236,7 +238,7 @@ def _warn_dark(imgs, what):
 
 
 def mlos(images, mappings, grid: VoxelGrid, *, interpolation: str = "linear", exponent: float | None = None,
-         progress: bool = False) -> np.ndarray:
+         progress: Progress = None) -> np.ndarray:
     """Multiplicative line-of-sight (MLOS) volume.
 
     ``E(x) = (prod_c I_c(P_c(x)))^exponent`` with ``I_c`` interpolated at the projection
@@ -253,6 +255,8 @@ def mlos(images, mappings, grid: VoxelGrid, *, interpolation: str = "linear", ex
     exponent : float in (0, 1], optional
         Default ``1/N`` (the geometric mean, which keeps image intensity units); 1 gives
         Atkinson & Soria's plain product.
+    progress : None, bool or callable
+        One step per depth plane; see :mod:`mitpiv.progress`.
 
     Returns
     -------
@@ -267,7 +271,7 @@ def mlos(images, mappings, grid: VoxelGrid, *, interpolation: str = "linear", ex
 
 
 def sapiv_refocus(images, mappings, grid: VoxelGrid, *, method: str = "additive", exponent: float | None = None,
-                  threshold_k: float | None = 3.0, interpolation: str = "linear", progress: bool = False) -> np.ndarray:
+                  threshold_k: float | None = 3.0, interpolation: str = "linear", progress: Progress = None) -> np.ndarray:
     """Synthetic-aperture refocusing of a camera array onto the grid's depth planes.
 
     Every image is reprojected onto each plane through its mapping (distortion included
@@ -407,13 +411,13 @@ def voxel_weights(mapping, grid: VoxelGrid, voxels, *, weights: str = "circle", 
 
 
 # ---------------------------------------------------------------------- MART / SMART
-def _candidates(imgs, maps, grid, interpolation, prune, progress):
+def _candidates(imgs, maps, grid, interpolation, prune, progress, what):
     """Flat indices of voxels worth reconstructing, their MLOS values and projections."""
     samplers = [_sampler(im, interpolation) for im in imgs]
     idx, init, uvs = [], [], [[] for _ in maps]
     plane = np.arange(grid.shape[1] * grid.shape[2])
     t0 = time.perf_counter()
-    for k in range(grid.shape[0]):
+    for k in track(range(grid.shape[0]), desc=f"{what}: MLOS planes", progress=progress, unit="plane"):
         uv = _plane_projections(maps, grid, k)
         inside = np.stack([_inside(p, im) for p, im in zip(uv, imgs, strict=True)])
         val = _combine([f(p) for f, p in zip(samplers, uv, strict=True)], inside, "multiplicative", 1.0 / len(imgs))
@@ -422,14 +426,13 @@ def _candidates(imgs, maps, grid, interpolation, prune, progress):
         init.append(val[keep])
         for c, p in enumerate(uv):
             uvs[c].append(p[keep].astype(np.float32))  # float32: 1e-4 px at 1000 px
-        if progress and ((k + 1) % max(grid.shape[0] // 10, 1) == 0 or k + 1 == grid.shape[0]):
-            print(f"mart: MLOS plane {k + 1}/{grid.shape[0]}, {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+    log.debug("%s: MLOS pass over %d planes in %.1f s", what, grid.shape[0], time.perf_counter() - t0)
     return np.concatenate(idx), np.concatenate(init), [np.concatenate(u) for u in uvs]
 
 
 def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 1.0, smart: bool = False,
          init="mlos", weights: str = "circle", psf_sigma_px: float = 0.5, interpolation: str = "linear",
-         prune: bool = True, preprocess: float | None = None, chunk: int = 1_000_000, progress: bool = False,
+         prune: bool = True, preprocess: float | None = None, chunk: int = 1_000_000, progress: Progress = None,
          return_info: bool = False):
     """MART or SMART reconstruction on sparse voxel-pixel weights.
 
@@ -467,6 +470,9 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
         ``k``.
     chunk : int
         Voxels per batch when computing weight footprints (bounds temporary memory).
+    progress : None, bool or callable
+        One step per MLOS plane (desc ``"mart: MLOS planes"``), then one per iteration
+        (``"mart: iterations"``); see :mod:`mitpiv.progress`.
     return_info : bool
         Also return a dict: active voxels, weight entries and bytes, the image residual
         ``||I - W E|| / ||I||`` after each iteration, timings.
@@ -491,7 +497,7 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
     _check_coverage(maps, imgs, grid, what)
     _warn_dark(imgs, what)
     t0 = time.perf_counter()
-    idx, e_mlos, uvs = _candidates(imgs, maps, grid, interpolation, prune, progress)
+    idx, e_mlos, uvs = _candidates(imgs, maps, grid, interpolation, prune, progress, what)
     k = kernels()
     model = weights
     mcode = CIRCLE if model == "circle" else GAUSSIAN
@@ -536,7 +542,7 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
     residuals, t1 = [], time.perf_counter()
     proj = [np.empty(f.size) for f in flat]
     lr = [np.empty(f.size) for f in flat] if smart else []
-    for it in range(iterations):
+    for it in track(range(iterations), desc=f"{what}: iterations", progress=progress):
         if smart:
             smart_sweep(cams, flat, vol, wsum, float(mu), proj, lr)
             if return_info:
@@ -546,8 +552,9 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
                 k["mart_camera"](cw.indptr, cw.indices, cw.data, f, cw.width, cw.span, vol, float(mu))
             if return_info:
                 residuals.append(_residual(cams, flat, proj, vol, k) / norm)
-        if progress:
-            print(f"{what}: iteration {it + 1}/{iterations}, {time.perf_counter() - t1:.1f} s", file=sys.stderr, flush=True)
+        log.debug("%s: iteration %d/%d, %.1f s", what, it + 1, iterations, time.perf_counter() - t1)
+    log.info("%s: %d active voxels of %d candidates, setup %.1f s, %d iterations %.1f s", what, len(idx), len(alive),
+             t_setup, iterations, time.perf_counter() - t1)
     out = np.zeros(grid.n_voxels, np.float32)
     out[idx] = vol
     out = out.reshape(grid.shape)
@@ -585,7 +592,7 @@ TOMO_METHODS = ("mlos", "mart", "smart", "sapiv")
 def reconstruct_volume(images, mappings, grid: VoxelGrid, method: str = "mart", *, iterations: int = 5, mu: float = 1.0,
                        weights: str = "circle", interpolation: str = "linear", preprocess: float | None = None,
                        combine: str = "multiplicative", threshold_k: float | None = 3.0,
-                       progress: bool = False) -> tuple[np.ndarray, dict]:
+                       progress: Progress = None) -> tuple[np.ndarray, dict]:
     """One entry point for the camera-image methods (``mlos``, ``mart``, ``smart``,
     ``sapiv``, the latter combining by ``combine`` with per-plane ``threshold_k``); returns
     (volume, info), info from :func:`mart` or empty."""

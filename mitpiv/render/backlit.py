@@ -6,15 +6,19 @@ several depths.
 
 from __future__ import annotations
 
-import sys
+import logging
 
 import mitsuba as mi
 import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
+from mitpiv.progress import Progress, track
 from mitpiv.render.render import render_sensor
+from mitpiv.render.variant import ensure_variant
 
 __all__ = ["backlit_scene", "render_backlit", "calibrate_dewarp", "stack_depth", "stack_pixels"]
+
+log = logging.getLogger(__name__)
 
 
 def backlit_scene(sensor, positions_mm, diameters_mm, *, backlight_mm: float = 30.0, backlight_size_mm: float = 100.0,
@@ -22,6 +26,7 @@ def backlit_scene(sensor, positions_mm, diameters_mm, *, backlight_mm: float = 3
     """Scene: ``sensor`` (dict or object), one black opaque sphere per particle, and a
     Lambertian backlight square of side ``backlight_size_mm`` a distance ``backlight_mm``
     behind the origin, facing the camera along the camera's optical axis."""
+    ensure_variant()
     p = np.asarray(positions_mm, dtype=np.float64).reshape(-1, 3)
     d = np.broadcast_to(np.asarray(diameters_mm, dtype=np.float64), (p.shape[0],))
     if p.shape[0] and (not np.all(np.isfinite(p)) or not np.all(d > 0)):
@@ -65,12 +70,13 @@ def stack_pixels(lf, u_index, v_index):
 
 
 def calibrate_dewarp(sensor: dict, depths_mm, *, target=None, spp: int = 32, white=None, degree_xy: int = 3,
-                     degree_z: int = 2, progress: bool = False):
+                     degree_z: int = 2, progress: Progress = None):
     """Fit a :class:`~mitpiv.analysis.backlit.Dewarp` for a plenoptic ``sensor`` (dict): a dot
     card (default 7x7 dots, 1/18 of the field of view wide at 1/9 spacing) is rendered facing the camera at each
     world depth offset in ``depths_mm`` (along the optical axis from the focal plane), the
     raw image decoded and refocused onto the card's depth, the dots detected and labelled,
     and (u_px, v_px, z_stack) -> world (x, y, z) fitted. Returns (dewarp, observations).
+    ``progress``: one step per depth (see :mod:`mitpiv.progress`).
     """
     from mitpiv.analysis.backlit import fit_dewarp
     from mitpiv.lightfield import decode, refocus
@@ -80,6 +86,7 @@ def calibrate_dewarp(sensor: dict, depths_mm, *, target=None, spp: int = 32, whi
     from mitpiv.render.targets import target_scene
 
     depths = np.asarray(depths_mm, dtype=np.float64).reshape(-1)
+    ensure_variant()
     probe = mi.load_dict({"type": "scene", "sensor": sensor})
     s = probe.sensors()[0]
     cam = s.camera
@@ -92,7 +99,7 @@ def calibrate_dewarp(sensor: dict, depths_mm, *, target=None, spp: int = 32, whi
         ws = mi.load_dict({"type": "scene", "integrator": {"type": "direct"}, "sensor": sensor, "env": {"type": "constant"}})
         white = render_sensor(ws, ws.sensors()[0], spp=spp)
     uvz, xyz = [], []
-    for k, dz in enumerate(depths):
+    for k, dz in enumerate(track(depths, desc="dewarp depths", progress=progress, unit="card")):
         centre = org + (cam.focus_distance_mm + dz) * fwd
         # the card's normal (local +z, its emitting side) faces the camera
         pose = np.array(mi.ScalarTransform4f().look_at(origin=mi.ScalarPoint3f(*centre.tolist()),
@@ -110,8 +117,6 @@ def calibrate_dewarp(sensor: dict, depths_mm, *, target=None, spp: int = 32, whi
         mi_, di_ = label_markers(det_px, cam.project(world))
         uvz.append(np.column_stack([det_px[di_], np.full(mi_.size, zs)]))
         xyz.append(world[mi_])
-        if progress:
-            print(f"dewarp card {k + 1}/{depths.size}: z {dz:+.2f} mm, {mi_.size}/{len(world)} dots", file=sys.stderr,
-                  flush=True)
+        log.debug("dewarp card %d/%d: z %+.2f mm, %d/%d dots", k + 1, depths.size, dz, mi_.size, len(world))
     uvz, xyz = np.vstack(uvz), np.vstack(xyz)
     return fit_dewarp(uvz, xyz, degree_xy=degree_xy, degree_z=degree_z), {"uvz": uvz, "xyz": xyz, "white": white}

@@ -17,6 +17,7 @@ import numpy as np
 
 from mitpiv.errors import ConfigError, FileFormatError, MitpivError
 from mitpiv.io.particles import read_particles_ply
+from mitpiv.render.variant import ensure_variant
 
 __all__ = ["load_scene", "load_dict", "bind_particle_shapes", "scene_defaults", "particle_files", "raise_plugin_error"]
 
@@ -97,7 +98,9 @@ def raise_plugin_error(e: Exception, where: str):
 
 
 def load_dict(d: dict):
-    """``mi.load_dict`` with mitpiv's error translation and particle binding."""
+    """``mi.load_dict`` with mitpiv's error translation and particle binding (selects the
+    default Mitsuba variant first if none is active, see :func:`ensure_variant`)."""
+    ensure_variant()
     try:
         obj = mi.load_dict(d)
     except Exception as e:
@@ -109,6 +112,9 @@ def load_dict(d: dict):
 
 def load_scene(xml_path, *, frame: int = 0, params: dict | None = None):
     """Load a scene XML for one frame and bind mitpiv's plugins.
+
+    The first call selects the Mitsuba variant and registers mitpiv's plugins when no
+    supported variant is active (:func:`~mitpiv.render.variant.ensure_variant`).
 
     Parameters
     ----------
@@ -123,10 +129,7 @@ def load_scene(xml_path, *, frame: int = 0, params: dict | None = None):
     -------
     mitsuba.Scene
     """
-    from mitpiv.render.variant import set_variant
-
-    if mi.variant() is None:
-        set_variant()
+    ensure_variant()
     xml_path = Path(xml_path)
     if not xml_path.is_file():
         raise ConfigError(f"scene file {str(xml_path)!r} does not exist.")

@@ -7,20 +7,25 @@ images go through exactly the camera model (distortion, thin lens, PSF) of the e
 
 from __future__ import annotations
 
-import sys
+import logging
 
 import mitsuba as mi
 import numpy as np
 
 from mitpiv.errors import ConfigError
 from mitpiv.physics.targets import CalibrationTarget, markers_world
+from mitpiv.progress import Progress, track
 from mitpiv.render.render import render_sensor, sensor_model
+from mitpiv.render.variant import ensure_variant
 
 __all__ = ["target_scene", "render_target_views", "save_target_views"]
+
+log = logging.getLogger(__name__)
 
 
 def target_scene(sensors, target: CalibrationTarget, pose, *, radiance: float = 1.0, texel_mm: float | None = None):
     """A Mitsuba scene holding ``sensors`` (objects or dicts) and the target at ``pose`` (4x4)."""
+    ensure_variant()
     pose = np.asarray(pose, dtype=float)
     if pose.shape != (4, 4):
         raise ConfigError(f"target_scene: pose must be a 4x4 matrix, got shape {pose.shape}.")
@@ -44,11 +49,12 @@ def target_scene(sensors, target: CalibrationTarget, pose, *, radiance: float = 
 
 
 def render_target_views(sensors, target: CalibrationTarget, poses, *, spp: int = 64, seed: int = 0,
-                        progress: bool = False) -> list[dict]:
+                        progress: Progress = None) -> list[dict]:
     """Render the target at each pose through each sensor.
 
     Returns one dict per pose: ``{"pose": 4x4, "markers_world": (n, 3), "images": [(H, W)
     float32 per sensor]}`` -- the exact marker coordinates are the calibration truth.
+    ``progress``: one step per pose (see :mod:`mitpiv.progress`).
     """
     if int(spp) != spp or spp < 1:
         raise ConfigError(f"render_target_views: 'spp' must be a positive integer, got {spp!r}.")
@@ -56,12 +62,12 @@ def render_target_views(sensors, target: CalibrationTarget, poses, *, spp: int =
     if not sensors:
         raise ConfigError("render_target_views: give at least one sensor.")
     out = []
-    for k, pose in enumerate(poses):
+    poses = list(poses)
+    for k, pose in enumerate(track(poses, desc="target views", progress=progress, unit="pose")):
         sc = target_scene(sensors, target, pose)
         images = [render_sensor(sc, s, spp=int(spp), seed=seed + k) for s in sc.sensors()]
         out.append({"pose": np.asarray(pose, dtype=float), "markers_world": markers_world(target, pose), "images": images})
-        if progress:
-            print(f"[{k + 1}/{len(poses)}] target pose rendered through {len(images)} camera(s)", file=sys.stderr, flush=True)
+        log.debug("target pose %d/%d rendered through %d camera(s)", k + 1, len(poses), len(images))
     return out
 
 

@@ -1,7 +1,10 @@
 """Mitsuba variant selection and plugin registration.
 
-``set_variant()`` picks ``cuda_ad_mono`` when a CUDA device works, else ``llvm_ad_mono``;
-the environment variable ``MITPIV_VARIANT`` overrides both. Dr.Jit's LLVM backend needs
+Importing mitpiv selects nothing (and imports neither Mitsuba nor Dr.Jit). The first
+operation that builds Mitsuba objects with mitpiv's plugins calls :func:`ensure_variant`,
+which keeps a supported variant that is already active and otherwise calls
+:func:`set_variant`. ``set_variant()`` picks ``cuda_ad_mono`` when a CUDA device works, else
+``llvm_ad_mono``; the environment variable ``MITPIV_VARIANT`` overrides both. Dr.Jit's LLVM backend needs
 LLVM >= 16 (older versions fail to compile kernels with "Cannot select: fmaximum"): that
 is checked here, with an error naming the fix. mitpiv's plugins are registered for the
 variant, and re-registered by a variant callback whenever the variant changes.
@@ -9,11 +12,14 @@ variant, and re-registered by a variant callback whenever the variant changes.
 
 from __future__ import annotations
 
+import logging
 import os
 
 from mitpiv.errors import BackendError, ConfigError
 
-__all__ = ["set_variant", "current_variant", "LLVM_FIX", "llvm_version"]
+__all__ = ["set_variant", "ensure_variant", "current_variant", "SUPPORTED", "LLVM_FIX", "llvm_version"]
+
+log = logging.getLogger(__name__)
 
 MIN_LLVM = (16, 0, 0)
 SUPPORTED = ("llvm_ad_mono", "cuda_ad_mono")
@@ -49,9 +55,57 @@ def _check_llvm() -> None:
 
 
 def current_variant() -> str | None:
-    import mitsuba as mi
+    """The active Mitsuba variant, or None (also None when Mitsuba has not been imported:
+    asking does not import it)."""
+    import sys
 
-    return mi.variant()
+    mi = sys.modules.get("mitsuba")
+    return None if mi is None else mi.variant()
+
+
+def _env_variant() -> str | None:
+    """``$MITPIV_VARIANT``, checked: None when unset or empty."""
+    env = os.environ.get("MITPIV_VARIANT", "").strip() or None
+    if env is not None and env not in SUPPORTED:
+        raise ConfigError(
+            f"MITPIV_VARIANT={env!r} is not a supported Mitsuba variant; set it to one of {', '.join(SUPPORTED)} "
+            f"or unset it (mitpiv's plugins need a vectorised '*_ad_mono' variant)."
+        )
+    return env
+
+
+def ensure_variant() -> str:
+    """Make sure a supported variant is active and mitpiv's plugins are registered for it.
+
+    Called by every entry point that builds Mitsuba objects with mitpiv's plugins
+    (:func:`mitpiv.render.scene.load_scene`, :func:`~mitpiv.render.scene.load_dict`,
+    target and backlit scenes). A supported variant that is already active (chosen by
+    :func:`set_variant` or by ``mitsuba.set_variant``) is kept; otherwise the default is
+    selected as :func:`set_variant` does (``$MITPIV_VARIANT``, else ``cuda_ad_mono`` when a
+    CUDA device works, else ``llvm_ad_mono``). Cheap when there is nothing to do.
+
+    Returns
+    -------
+    str
+        The variant now active.
+
+    Raises
+    ------
+    ConfigError
+        ``MITPIV_VARIANT`` names an unsupported variant.
+    BackendError
+        No supported variant can be used on this machine.
+    """
+    _env_variant()
+    active = current_variant()
+    if active in SUPPORTED and _callback_installed:
+        from mitpiv.render.plugins import register_all
+
+        register_all()  # no-op when the plugins were built for this variant
+        return active
+    if active in SUPPORTED:  # selected with mitsuba.set_variant before mitpiv saw it
+        return set_variant(active)
+    return set_variant()
 
 
 def _on_variant_change(old, new) -> None:
@@ -78,7 +132,8 @@ def set_variant(name: str | None = None) -> str:
     global _callback_installed
     import mitsuba as mi
 
-    requested = name or os.environ.get("MITPIV_VARIANT") or None
+    before = mi.variant()
+    requested = name or _env_variant()
     if requested is not None and requested not in SUPPORTED:
         raise ConfigError(
             f"set_variant: variant {requested!r} is not supported; use one of {', '.join(SUPPORTED)} "
@@ -107,4 +162,6 @@ def set_variant(name: str | None = None) -> str:
         from mitpiv.render.plugins import register_all
 
         register_all()
+    if before != chosen:
+        log.info("Mitsuba variant %s selected (was %s); mitpiv's plugins registered", chosen, before)
     return chosen

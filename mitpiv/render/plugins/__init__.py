@@ -2,6 +2,11 @@
 
 :func:`register_all` imports them for the active variant, and reloads a module whose
 classes were built for another variant (its base classes belong to that variant).
+
+A plugin module subclasses the active variant's classes when it is imported, so it needs a
+variant: importing this package selects the default one
+(:func:`mitpiv.render.variant.ensure_variant`) when no supported variant is active. Nothing
+else in mitpiv imports this package before the first render.
 """
 
 from __future__ import annotations
@@ -23,3 +28,13 @@ def register_all() -> None:
             importlib.import_module(full)
         elif getattr(mod, "_VARIANT", None) != mi.variant():
             importlib.reload(mod)
+
+
+def _need_variant() -> None:
+    from mitpiv.render.variant import SUPPORTED, current_variant, ensure_variant
+
+    if current_variant() not in SUPPORTED:
+        ensure_variant()
+
+
+_need_variant()
