@@ -17,8 +17,7 @@ from __future__ import annotations
 import logging
 
 from mitpiv.errors import BackendError, ConfigError, MitpivError, MitpivWarning
-
-__version__ = "0.1.0"
+from mitpiv.version import __version__
 
 __all__ = ["set_variant", "render_scene", "MitpivError", "ConfigError", "BackendError", "MitpivWarning", "__version__"]
 

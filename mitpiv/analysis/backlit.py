@@ -55,6 +55,22 @@ class Dewarp:
     scale: np.ndarray
     rms_mm: float
 
+    @classmethod
+    def load(cls, path) -> Dewarp:
+        """Read a dewarp written by :func:`mitpiv.io.write_dewarp` (a backlit run's ``dewarp.npz``)."""
+        import dataclasses
+
+        from mitpiv.io.backlit import read_dewarp
+
+        rec = read_dewarp(path)
+        return cls(**{f.name: rec[f.name] for f in dataclasses.fields(cls)})
+
+    def save(self, path, *, uvz=None, xyz=None):
+        """Write the dewarp (and optionally its calibration observations); see :func:`mitpiv.io.write_dewarp`."""
+        from mitpiv.io.backlit import write_dewarp
+
+        return write_dewarp(path, self, uvz=uvz, xyz=xyz)
+
     def __call__(self, uvz) -> np.ndarray:
         return _poly_terms(uvz, self.degree_xy, self.degree_z, self.centre, self.scale) @ self.coef
 
@@ -107,6 +123,22 @@ class BacklitDetections:
 
     def __len__(self) -> int:
         return int(self.uv_px.shape[0])
+
+    @classmethod
+    def load(cls, path) -> BacklitDetections:
+        """Read detections written by :func:`mitpiv.io.write_detections`."""
+        import dataclasses
+
+        from mitpiv.io.backlit import read_detections
+
+        rec = read_detections(path)
+        return cls(**{f.name: rec[f.name] for f in dataclasses.fields(cls)})
+
+    def save(self, path, *, min_map=None):
+        """Write the detections (and optionally the minimum map); see :func:`mitpiv.io.write_detections`."""
+        from mitpiv.io.backlit import write_detections
+
+        return write_detections(path, self, min_map=min_map)
 
 
 def _split_touching(mask, min_separation_px):

@@ -276,6 +276,19 @@ class MatchResult:
         """95 % uncertainty per axis, 1.96 standard deviations of the error."""
         return 1.96 * self.std(voxels)
 
+    def save(self, path):
+        """Write the matches to ``.npz`` (atomic); see :func:`mitpiv.io.matches.write_matches`."""
+        from mitpiv.io.matches import write_matches
+
+        return write_matches(path, self)
+
+    @classmethod
+    def load(cls, path) -> MatchResult:
+        """Read matches written by :meth:`save`."""
+        from mitpiv.io.matches import read_matches
+
+        return cls(**read_matches(path))
+
     def summary(self) -> dict:
         out = {"n_found": self.n_found, "n_truth": self.n_truth, "n_matched": self.n_matched,
                "radius_mm": self.radius_mm, "detection_rate": self.detection_rate, "ghost_fraction": self.ghost_fraction}

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from mitpiv.analysis.particles import gauss3_offset as _gauss3
-from mitpiv.errors import ConfigError, FileFormatError, check_positive
+from mitpiv.errors import ConfigError, check_positive
 from mitpiv.progress import Progress, track
 
 log = logging.getLogger(__name__)
@@ -110,7 +110,7 @@ class VectorField:
         """Read a field written by :meth:`save`; see :func:`mitpiv.io.read_vector_field`."""
         from mitpiv.io.vectors import read_vector_field
 
-        return read_vector_field(path)
+        return cls(**read_vector_field(path))
 
 
 # ---------------------------------------------------------------------------------- helpers

@@ -1,27 +1,24 @@
 """File formats: EXR images with JSON metadata, particle PLY files, the truth format, volumes,
-light fields, vector fields, backlit dewarps and detections, run records (JSON); every
-writer is atomic (a temporary file in the same folder renamed over the target)."""
+light fields, vector fields, particle matches, backlit dewarps and detections, run records
+(JSON), figures; every writer is atomic (a temporary file in the same folder renamed over
+the target). Cameras are rebuilt from image metadata by :func:`camera_from_metadata`.
 
+io sits below the packages whose objects it stores: its readers return plain records
+(dicts of arrays and metadata) that the classes build themselves from (``LightField.load``,
+``VectorField.load``, ...), so io imports no lightfield or analysis module."""
+
+from mitpiv.io.arrays import read_npz, write_npz
+from mitpiv.io.backlit import read_detections, read_dewarp, write_detections, write_dewarp
 from mitpiv.io.camera import camera_from_metadata
 from mitpiv.io.exr import read_exr, write_exr
+from mitpiv.io.figures import save_figure
+from mitpiv.io.lightfield import read_lightfield, write_lightfield
 from mitpiv.io.particles import read_particles_ply, read_truth, write_particles_ply, write_truth
+from mitpiv.io.records import read_json, to_jsonable, write_json, write_text
+from mitpiv.io.vectors import read_vector_field, write_vector_field
 from mitpiv.io.volume import read_volume, write_volume
 
 __all__ = ["read_exr", "write_exr", "write_particles_ply", "read_particles_ply", "write_truth", "read_truth",
-           "read_volume", "write_volume"]
-__all__ += ["camera_from_metadata"]
-
-# Light fields, vector fields, backlit data, run records, generic arrays (the data classes
-# are imported lazily inside the readers: importing mitpiv.io loads no lightfield/analysis).
-from mitpiv.io.arrays import read_npz, write_npz
-from mitpiv.io.backlit import read_detections, read_dewarp, write_detections, write_dewarp
-from mitpiv.io.lightfield import read_lightfield, write_lightfield
-from mitpiv.io.records import read_json, to_jsonable, write_json, write_text
-from mitpiv.io.vectors import read_vector_field, write_vector_field
-
-__all__ += ["write_npz", "read_npz", "write_dewarp", "read_dewarp", "write_detections", "read_detections",
-            "write_lightfield", "read_lightfield", "write_json", "read_json", "write_text", "to_jsonable",
-            "write_vector_field", "read_vector_field"]
-from mitpiv.io.figures import save_figure  # noqa: E402
-
-__all__ += ["save_figure"]
+           "read_volume", "write_volume", "camera_from_metadata", "write_npz", "read_npz", "write_dewarp",
+           "read_dewarp", "write_detections", "read_detections", "write_lightfield", "read_lightfield", "write_json",
+           "read_json", "write_text", "to_jsonable", "write_vector_field", "read_vector_field", "save_figure"]

@@ -25,7 +25,7 @@ import numpy as np
 from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.io.arrays import read_npz, write_npz
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # io imports no analysis module at run time: readers return records
     from mitpiv.analysis.backlit import BacklitDetections, Dewarp
 
 __all__ = ["write_dewarp", "read_dewarp", "write_detections", "read_detections"]
@@ -76,18 +76,14 @@ def write_dewarp(path, dewarp: Dewarp, *, uvz=None, xyz=None) -> Path:
                             "uvz": uvz, "xyz": xyz}, owner="write_dewarp")
 
 
-def read_dewarp(path, *, return_observations: bool = False):
-    """Read a dewarp written by :func:`write_dewarp` (or a backlit run's ``dewarp.npz``).
-
-    Returns
-    -------
-    Dewarp, or (Dewarp, dict) with ``return_observations``: the dict holds ``uvz`` and
-    ``xyz`` ((M, 3) arrays, or None when the file has no observations).
+def read_dewarp(path) -> dict:
+    """Read a dewarp written by :func:`write_dewarp` (or a backlit run's ``dewarp.npz``) as a
+    record: the :class:`~mitpiv.analysis.backlit.Dewarp` fields (``Dewarp.load(path)`` builds
+    one) and the calibration observations ``uvz``, ``xyz`` ((M, 3), or None when the file
+    has none).
 
     Raises :class:`FileFormatError` naming the file when it is missing or not a dewarp.
     """
-    from mitpiv.analysis.backlit import Dewarp
-
     z = read_npz(path, what="backlit dewarp", required=_DEWARP)
     dxy, dz = int(z["degree_xy"]), int(z["degree_z"])
     n = _n_terms(dxy, dz)
@@ -95,10 +91,8 @@ def read_dewarp(path, *, return_observations: bool = False):
         raise FileFormatError(f"backlit dewarp {str(path)!r}: coef {z['coef'].shape}, centre {z['centre'].shape}, "
                               f"scale {z['scale'].shape} do not fit degree_xy={dxy}, degree_z={dz} (({n}, 3), (3,), "
                               f"(3,) expected).")
-    dewarp = Dewarp(z["coef"], dxy, dz, z["centre"], z["scale"], float(z["rms_mm"]))
-    if not return_observations:
-        return dewarp
-    return dewarp, {"uvz": z.get("uvz"), "xyz": z.get("xyz")}
+    return {"coef": z["coef"], "degree_xy": dxy, "degree_z": dz, "centre": z["centre"], "scale": z["scale"],
+            "rms_mm": float(z["rms_mm"]), "uvz": z.get("uvz"), "xyz": z.get("xyz")}
 
 
 def write_detections(path, detections: BacklitDetections, *, min_map=None) -> Path:
@@ -128,18 +122,14 @@ def write_detections(path, detections: BacklitDetections, *, min_map=None) -> Pa
     return write_npz(path, {**arrays, "min_map": min_map}, owner="write_detections")
 
 
-def read_detections(path, *, return_min_map: bool = False):
-    """Read detections written by :func:`write_detections` (or a backlit run's ``detections_k.npz``).
-
-    Returns
-    -------
-    BacklitDetections, or (BacklitDetections, min_map) with ``return_min_map`` (``min_map``
-    (H, W) float32, or None when the file has none).
+def read_detections(path) -> dict:
+    """Read detections written by :func:`write_detections` (or a backlit run's
+    ``detections_k.npz``) as a record: the
+    :class:`~mitpiv.analysis.backlit.BacklitDetections` fields (``BacklitDetections.load(path)``
+    builds one) and ``min_map`` ((H, W) float32, or None when the file has none).
 
     Raises :class:`FileFormatError` naming the file when it is missing or not detections.
     """
-    from mitpiv.analysis.backlit import BacklitDetections
-
     z = read_npz(path, what="backlit detections", required=_PER_PARTICLE)
     n = z["uv_px"].shape[0] if z["uv_px"].ndim == 2 else -1
     bad = {k: z[k].shape for k in (*_PER_PARTICLE, "positions_mm", "diameters_mm")
@@ -147,6 +137,5 @@ def read_detections(path, *, return_min_map: bool = False):
     if n < 0 or z["uv_px"].shape[1] != 2 or bad:
         raise FileFormatError(f"backlit detections {str(path)!r}: the entries do not describe N particles (uv_px "
                               f"{z['uv_px'].shape}, mismatched: {bad}).")
-    det = BacklitDetections(*(z[k] for k in _PER_PARTICLE), positions_mm=z.get("positions_mm"),
-                            diameters_mm=z.get("diameters_mm"))
-    return (det, z.get("min_map")) if return_min_map else det
+    return {**{k: z[k] for k in _PER_PARTICLE}, "positions_mm": z.get("positions_mm"),
+            "diameters_mm": z.get("diameters_mm"), "min_map": z.get("min_map")}

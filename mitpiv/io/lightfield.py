@@ -34,14 +34,15 @@ def write_lightfield(path, lf: LightField) -> Path:
                             "info": json.dumps(to_jsonable(lf.info))}, compressed=False, owner="write_lightfield")
 
 
-def read_lightfield(path) -> LightField:
-    """Read a light field written by :func:`write_lightfield` (or ``LightField.save``).
+def read_lightfield(path) -> dict:
+    """Read a light field written by :func:`write_lightfield` (or ``LightField.save``) as
+    the record ``LightField(**record)`` takes (``LightField.load(path)`` does that): the
+    arrays, ``optics`` (a PlenopticCamera or None) and ``info``.
 
     Raises :class:`~mitpiv.errors.FileFormatError` naming the file when it is missing or
     not a mitpiv light field.
     """
     from mitpiv.errors import FileFormatError
-    from mitpiv.lightfield.decode import LightField
     from mitpiv.physics.plenoptic import PlenopticCamera
 
     z = read_npz(path, what="mitpiv light field", required=(*_ARRAYS, "optics", "info"))
@@ -50,4 +51,4 @@ def read_lightfield(path) -> LightField:
         cam = None if optics is None else PlenopticCamera.from_dict(optics)
     except (KeyError, TypeError, ValueError) as e:
         raise FileFormatError(f"{str(path)!r}: the light field's optics are not a plenoptic camera ({e}).") from None
-    return LightField(*(z[k] for k in _ARRAYS), cam, json_entry(z, "info", path))
+    return {**{k: z[k] for k in _ARRAYS}, "optics": cam, "info": json_entry(z, "info", path)}

@@ -84,7 +84,7 @@ class LightField:
         """Read a light field written by :meth:`save`; see :func:`mitpiv.io.read_lightfield`."""
         from mitpiv.io.lightfield import read_lightfield
 
-        return read_lightfield(path)
+        return cls(**read_lightfield(path))
 
     def _need_optics(self, what: str) -> PlenopticCamera:
         if self.optics is None:

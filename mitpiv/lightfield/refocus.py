@@ -345,3 +345,15 @@ def refocus_volume(lf: LightField, x_mm, y_mm, z_mm, *, method: str = "additive"
             stack[k] = res.reshape(len(ys), len(xs))
         result = stack if out is None else None
     return result if out is None else np.load(out, mmap_mode="r")
+
+
+def stack_depth(camera, points_world) -> np.ndarray:
+    """Depth from the focal plane (+ farther, the focal-stack convention) of world points."""
+    return camera.world_to_local(points_world)[..., 2] - camera.focus_distance_mm
+
+
+def stack_pixels(lf, u_index, v_index):
+    """Refocused-image indices (column, row; pixel centres at integers) -> sensor pixels of
+    the lenslet lattice, the coordinates a :class:`Dewarp` is fitted in."""
+    ds, dt = grid_steps(lf)
+    return lf.s_px[0] + np.asarray(u_index) * ds, lf.t_px[0] + np.asarray(v_index) * dt

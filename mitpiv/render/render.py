@@ -12,13 +12,13 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-import mitpiv
 from mitpiv.errors import ConfigError
 from mitpiv.io.atomic import atomic_path
 from mitpiv.io.exr import write_exr
 from mitpiv.progress import bar
 from mitpiv.render.scene import load_scene
 from mitpiv.streams import check_seed, render_seed
+from mitpiv.version import __version__
 
 _log = logging.getLogger(__name__)
 
@@ -206,7 +206,7 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
                 arr = render_sensor(sc, sensor, spp=spp or 0, seed=rseed)
                 dt = time.perf_counter() - t0
                 meta = {
-                    "mitpiv_version": mitpiv.__version__,
+                    "mitpiv_version": __version__,
                     "mitsuba_version": mi.__version__,
                     "drjit_version": dr.__version__,
                     "variant": mi.variant(),

@@ -35,12 +35,10 @@ def _plt():
 
 
 def save_figure(fig, path, *, dpi: int = 90) -> None:
-    """Save a matplotlib figure as PNG atomically and close it."""
-    from mitpiv.io.atomic import atomic_path
+    """Save a matplotlib figure atomically and close it (:func:`mitpiv.io.save_figure`)."""
+    from mitpiv.io.figures import save_figure as save
 
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=dpi, format="png")
-    _plt().close(fig)
+    save(fig, path, dpi=dpi)
 
 
 def write(report: Report, out_dir) -> dict:
@@ -127,9 +125,9 @@ def _mosaic(raw_file):
 
 def _particle_errors(run: Path, frame: int):
     def draw(path):
-        from mitpiv.io.matches import read_matches
+        from mitpiv.analysis import MatchResult
 
-        read_matches(run / "evaluate" / f"matches_{frame}.npz").plot(path, title=f"frame {frame} particle position "
+        MatchResult.load(run / "evaluate" / f"matches_{frame}.npz").plot(path, title=f"frame {frame} particle position "
                                                                                  "error")
 
     return draw
@@ -171,7 +169,8 @@ def tomo_report(cfg, run_dir, results: dict, timings: dict) -> Report:
         m = ev[f"frame{frame}"]
         pr = m["particles"]
         u = pr.get("u95_vox", [float("nan")] * 3)
-        lines.append(f"| {frame} | {m['Q']:.3f} | {m['Q*']:.3f} | {m["Q'"]:.3f} | {m['SNR']:.1f} | "
+        q_rank = m["Q'"]
+        lines.append(f"| {frame} | {m['Q']:.3f} | {m['Q*']:.3f} | {q_rank:.3f} | {m['SNR']:.1f} | "
                      f"{100 * pr['detection_rate']:.1f} % | {100 * pr['ghost_fraction']:.1f} % | "
                      f"{u[0]:.3f} / {u[1]:.3f} / {u[2]:.3f} |")
     r, b = pv["rms_vox"], pv["bias_vox"]
@@ -191,8 +190,8 @@ def _backlit_images(raw, det):
         fig, ax = plt.subplots(1, 2, figsize=(11, 5))
         ax[0].imshow(raw, cmap="gray")
         ax[0].set_title("raw plenoptic image, frame 0")
-        ax[1].imshow(det.min_map, cmap="gray", vmin=0, vmax=1.2)
-        ax[1].plot(det.uv_px[:, 0], det.uv_px[:, 1], "r+", ms=8, label="detections")
+        ax[1].imshow(det["min_map"], cmap="gray", vmin=0, vmax=1.2)
+        ax[1].plot(det["uv_px"][:, 0], det["uv_px"][:, 1], "r+", ms=8, label="detections")
         ax[1].set_title("minimum transmittance over the focal stack")
         ax[1].legend(loc="upper right")
         fig.tight_layout()
@@ -223,15 +222,14 @@ def _backlit_errors(errors, d_true_mm):
 def backlit_report(cfg, run_dir, results: dict, timings: dict) -> Report:
     """The report of a backlit run: raw image, minimum map with detections, depth-error
     histogram, size scatter, detection and tracking tables."""
-    from mitpiv.io import read_exr, read_truth
+    from mitpiv.io import read_exr, read_npz, read_truth
     from mitpiv.io.backlit import read_detections
-    from mitpiv.io.records import read_arrays
 
     run = Path(run_dir)
     truth = read_truth(run / "field" / "truth.npz")
     raw = read_exr(run / "render" / "raw_frame000.exr")[0]
     det = read_detections(run / "detect" / "detections_0.npz")
-    errors = read_arrays(run / "evaluate" / "errors_0.npz")
+    errors = read_npz(run / "evaluate" / "errors_0.npz")
     figures = {"images.png": _backlit_images(raw, det),
                "errors.png": _backlit_errors(errors, truth["diameters_um"] * 1e-3)}
     ev = results["evaluate"]

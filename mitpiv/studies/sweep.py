@@ -45,7 +45,7 @@ from mitpiv.studies.schema import read_toml
 
 log = logging.getLogger(__name__)
 
-__all__ = ["load_study", "run_sweep", "run_point", "point_id", "flatten", "plot_sweep"]
+__all__ = ["load_study", "run_sweep", "run_point", "point_id", "flatten"]
 
 
 def __getattr__(name):

@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mitpiv.analysis.backlit import BacklitDetections, Dewarp
+from mitpiv.analysis.piv3d import VectorField
 from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.io import (
     read_detections,
@@ -34,6 +36,7 @@ from mitpiv.io import (
     write_volume,
 )
 from mitpiv.io.records import to_jsonable
+from mitpiv.lightfield import LightField
 
 UM_PER_MM = 1000.0  # definition of the micrometre
 
@@ -60,7 +63,6 @@ def _lightfield(optics=True):
 
 
 def _vector_field(dt_s=0.002):
-    from mitpiv.analysis.piv3d import VectorField
 
     rng = np.random.default_rng(1)
     shape = (3, 4, 5)
@@ -106,11 +108,10 @@ def _truth_arrays(n=12):
 
 @pytest.mark.parametrize("optics", [True, False])
 def test_lightfield_round_trip(tmp_path, optics):
-    from mitpiv.lightfield import LightField
 
     lf = _lightfield(optics)
     write_lightfield(tmp_path / "lf.npz", lf)
-    back = read_lightfield(tmp_path / "lf.npz")
+    back = LightField.load(tmp_path / "lf.npz")
     for k in ("data", "s_px", "t_px", "du_px", "view_weights", "valid"):
         a, b = getattr(back, k), getattr(lf, k)
         assert a.dtype == b.dtype
@@ -124,16 +125,15 @@ def test_lightfield_round_trip(tmp_path, optics):
     # the methods scripts use delegate to the same format
     lf.save(tmp_path / "m.npz")
     np.testing.assert_array_equal(LightField.load(tmp_path / "m.npz").data, lf.data)
-    np.testing.assert_array_equal(read_lightfield(tmp_path / "m.npz").view_weights, lf.view_weights)
+    np.testing.assert_array_equal(read_lightfield(tmp_path / "m.npz")["view_weights"], lf.view_weights)
 
 
 @pytest.mark.parametrize("dt_s", [None, 0.002])
 def test_vector_field_round_trip(tmp_path, dt_s):
-    from mitpiv.analysis.piv3d import VectorField
 
     f = _vector_field(dt_s)
     write_vector_field(tmp_path / "f.npz", f)
-    g = read_vector_field(tmp_path / "f.npz")
+    g = VectorField.load(tmp_path / "f.npz")
     for k in ("x_mm", "y_mm", "z_mm", "u", "v", "w", "snr", "peak", "valid", "outlier", "replaced"):
         np.testing.assert_array_equal(getattr(g, k), getattr(f, k))
         assert getattr(g, k).dtype == getattr(f, k).dtype
@@ -203,7 +203,7 @@ def test_old_backlit_truth_with_diameters_mm_reads(tmp_path):
 def test_dewarp_round_trip_and_old_file(tmp_path):
     dw, uvz, xyz = _dewarp_and_observations()
     write_dewarp(tmp_path / "dewarp.npz", dw, uvz=uvz, xyz=xyz)
-    back, obs = read_dewarp(tmp_path / "dewarp.npz", return_observations=True)
+    back, obs = Dewarp.load(tmp_path / "dewarp.npz"), read_dewarp(tmp_path / "dewarp.npz")
     for k in ("coef", "centre", "scale"):
         np.testing.assert_array_equal(getattr(back, k), getattr(dw, k))
     assert (back.degree_xy, back.degree_z, back.rms_mm) == (dw.degree_xy, dw.degree_z, dw.rms_mm)
@@ -214,14 +214,15 @@ def test_dewarp_round_trip_and_old_file(tmp_path):
     np.testing.assert_allclose(back(uvz), xyz, atol=1e-6)
     # without observations
     write_dewarp(tmp_path / "d2.npz", dw)
-    assert read_dewarp(tmp_path / "d2.npz", return_observations=True)[1] == {"uvz": None, "xyz": None}
+    rec = read_dewarp(tmp_path / "d2.npz")
+    assert rec["uvz"] is None and rec["xyz"] is None
     with pytest.raises(ConfigError, match="both"):
         write_dewarp(tmp_path / "d3.npz", dw, uvz=uvz)
     assert not (tmp_path / "d3.npz").exists()
     # exactly what mitpiv.studies.backlit._stage_calibrate wrote
     np.savez(tmp_path / "old.npz", coef=dw.coef, degree_xy=dw.degree_xy, degree_z=dw.degree_z, centre=dw.centre,
              scale=dw.scale, rms_mm=dw.rms_mm, uvz=uvz, xyz=xyz)
-    np.testing.assert_array_equal(read_dewarp(tmp_path / "old.npz")(uvz), dw(uvz))
+    np.testing.assert_array_equal(Dewarp.load(tmp_path / "old.npz")(uvz), dw(uvz))
 
 
 @pytest.mark.parametrize("world", [True, False])
@@ -229,7 +230,8 @@ def test_detections_round_trip(tmp_path, world):
     det = _detections(world)
     mm = np.random.default_rng(5).uniform(0, 1.2, (40, 30))
     write_detections(tmp_path / "detections_0.npz", det, min_map=mm)
-    back, min_map = read_detections(tmp_path / "detections_0.npz", return_min_map=True)
+    back, min_map = BacklitDetections.load(tmp_path / "detections_0.npz"), \
+        read_detections(tmp_path / "detections_0.npz")["min_map"]
     assert len(back) == len(det)
     for k in ("uv_px", "z_stack_mm", "area_px", "diameter_px", "aspect", "darkness", "positions_mm", "diameters_mm"):
         if getattr(det, k) is None:
@@ -238,10 +240,10 @@ def test_detections_round_trip(tmp_path, world):
             np.testing.assert_array_equal(getattr(back, k), getattr(det, k))
     np.testing.assert_array_equal(min_map, mm.astype(np.float32))
     write_detections(tmp_path / "no_map.npz", det)
-    assert read_detections(tmp_path / "no_map.npz", return_min_map=True)[1] is None
+    assert read_detections(tmp_path / "no_map.npz")["min_map"] is None
     empty = _detections(world, n=0)
     write_detections(tmp_path / "empty.npz", empty)
-    assert len(read_detections(tmp_path / "empty.npz")) == 0
+    assert len(BacklitDetections.load(tmp_path / "empty.npz")) == 0
 
 
 def test_old_detections_file_reads(tmp_path):
@@ -251,7 +253,8 @@ def test_old_detections_file_reads(tmp_path):
     np.savez(tmp_path / "detections_1.npz", uv_px=det.uv_px, z_stack_mm=det.z_stack_mm, area_px=det.area_px,
              diameter_px=det.diameter_px, aspect=det.aspect, darkness=det.darkness, positions_mm=det.positions_mm,
              diameters_mm=det.diameters_mm, min_map=mm)
-    back, min_map = read_detections(tmp_path / "detections_1.npz", return_min_map=True)
+    back, min_map = BacklitDetections.load(tmp_path / "detections_1.npz"), \
+        read_detections(tmp_path / "detections_1.npz")["min_map"]
     np.testing.assert_array_equal(back.positions_mm, det.positions_mm)
     np.testing.assert_array_equal(back.diameters_mm, det.diameters_mm)
     np.testing.assert_array_equal(back.uv_px, det.uv_px)

@@ -29,7 +29,7 @@ def _tables(path):
 def test_every_mistyped_key_is_named_with_the_nearest_valid_one(path, tmp_path, monkeypatch):
     # nothing may render or write while the experiment is checked
     monkeypatch.setattr("mitpiv.studies.runner.run_stages", lambda *a, **k: pytest.fail("a stage ran"))
-    for table, key, value in _tables(path):
+    for table, key, _value in _tables(path):
         if table == "scene" and key == "params":
             continue  # free-form $name substitutions of the scene XML
         raw = path.read_text()

@@ -29,6 +29,7 @@ depth, lateral and size errors per frame; two-frame tracking against the true ve
 from __future__ import annotations
 
 import functools
+import logging
 from functools import cache
 from typing import Annotated, Literal
 
@@ -36,11 +37,13 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from mitpiv.errors import ConfigError
+from mitpiv.progress import Progress, track
 from mitpiv.studies.runner import Kind, Stage, StageContext
 from mitpiv.studies.schema import Table, Vec3, discriminated, model_from_signature
 
 STAGES = ("field", "calibrate", "render", "detect", "evaluate", "report")
 PosFloat = Annotated[float, Field(gt=0)]
+log = logging.getLogger(__name__)
 
 
 class CameraTable(Table):
@@ -158,6 +161,66 @@ def _camera(sensor: dict):
         raise ConfigError(f"experiment: [camera] is not a valid plenoptic camera: {e}") from None
 
 
+def calibrate_dewarp(sensor: dict, depths_mm, *, target=None, spp: int = 32, white=None, degree_xy: int = 3,
+                     degree_z: int = 2, seed: int = 0, progress: Progress = None):
+    """Fit a :class:`~mitpiv.analysis.backlit.Dewarp` for a plenoptic ``sensor`` (dict): a dot
+    card (default 7x7 dots, 1/18 of the field of view wide at 1/9 spacing) is rendered facing the camera at each
+    world depth offset in ``depths_mm`` (along the optical axis from the focal plane), the
+    raw image decoded and refocused onto the card's depth, the dots detected and labelled,
+    and (u_px, v_px, z_stack) -> world (x, y, z) fitted. Returns (dewarp, observations).
+    ``seed``: the experiment seed (each card render takes its own stream);
+    ``progress``: one step per depth (see :mod:`mitpiv.progress`).
+    """
+    from mitpiv.analysis.backlit import fit_dewarp
+    from mitpiv.lightfield import decode, refocus
+    from mitpiv.lightfield.geometry import alpha_from_z
+    from mitpiv.lightfield.refocus import stack_depth, stack_pixels
+    from mitpiv.physics.targets import CalibrationTarget, markers_world
+    from mitpiv.reconstruct.calibration import detect_dots, label_markers
+    from mitpiv.render.render import render_sensor
+    from mitpiv.render.targets import target_scene
+    from mitpiv.render.variant import ensure_variant
+    from mitpiv.streams import derived_seed
+
+    depths = np.asarray(depths_mm, dtype=np.float64).reshape(-1)
+    ensure_variant()
+    import mitsuba as mi
+
+    probe = mi.load_dict({"type": "scene", "sensor": sensor})
+    s = probe.sensors()[0]
+    cam = s.camera
+    m = np.array(sensor["to_world"].matrix, dtype=np.float64).reshape(4, 4)
+    fwd, up, org = m[:3, 2], m[:3, 1], m[:3, 3]
+    fov_mm = cam.resolution[0] * cam.pixel_pitch_um * 1e-3 / cam.magnification
+    if target is None:
+        target = CalibrationTarget("dots", 7, 7, fov_mm / 9.0, dot_diameter_mm=fov_mm / 18.0)
+    if white is None:
+        ws = mi.load_dict({"type": "scene", "integrator": {"type": "direct"}, "sensor": sensor, "env": {"type": "constant"}})
+        white = render_sensor(ws, ws.sensors()[0], spp=spp)
+    uvz, xyz = [], []
+    for k, dz in enumerate(track(depths, desc="dewarp depths", progress=progress, unit="card")):
+        centre = org + (cam.focus_distance_mm + dz) * fwd
+        # the card's normal (local +z, its emitting side) faces the camera
+        pose = np.array(mi.ScalarTransform4f().look_at(origin=mi.ScalarPoint3f(*centre.tolist()),
+                                                        target=mi.ScalarPoint3f(*(centre - fwd).tolist()),
+                                                        up=mi.ScalarVector3f(*up.tolist())).matrix, dtype=np.float64)
+        sc = target_scene([sensor], target, pose)
+        raw = render_sensor(sc, sc.sensors()[0], spp=spp, seed=derived_seed(seed, "calibration", "dewarp_card", k, bits=32))
+        lf = decode(raw, optics=cam, white=white)
+        world = markers_world(target, pose)
+        zs = float(np.mean(stack_depth(cam, world)))
+        img = refocus(lf, float(alpha_from_z(zs, focal_length_mm=cam.focal_length_mm, magnification=cam.magnification)))
+        # clean renders: half the dot contrast (the default noise floor assumes a noisy image)
+        det = detect_dots(img, threshold=0.5 * float(np.percentile(img, 99.9) - np.median(img))) - 0.5  # indices
+        det_px = np.column_stack(stack_pixels(lf, det[:, 0], det[:, 1]))
+        mi_, di_ = label_markers(det_px, cam.project(world))
+        uvz.append(np.column_stack([det_px[di_], np.full(mi_.size, zs)]))
+        xyz.append(world[mi_])
+        log.debug("dewarp card %d/%d: z %+.2f mm, %d/%d dots", k + 1, depths.size, dz, mi_.size, len(world))
+    uvz, xyz = np.vstack(uvz), np.vstack(xyz)
+    return fit_dewarp(uvz, xyz, degree_xy=degree_xy, degree_z=degree_z), {"uvz": uvz, "xyz": xyz, "white": white}
+
+
 # ------------------------------------------------------------------------------- stages
 def stage_field(ctx: StageContext) -> dict:
     from mitpiv.io import write_truth
@@ -181,14 +244,12 @@ def _truth(ctx):
 
 
 def stage_calibrate(ctx: StageContext) -> dict:
-    from mitpiv.io.backlit import write_dewarp
-
     c = ctx.cfg.calibration
     sensor = backlit_sensor(ctx.cfg.camera)
     _camera(sensor)
     dewarp, obs = calibrate_dewarp(sensor, c.depths_mm, spp=c.spp, degree_xy=c.degree_xy, degree_z=c.degree_z,
-                                   progress=ctx.progress)
-    write_dewarp(ctx.out / "dewarp.npz", dewarp, uvz=obs["uvz"], xyz=obs["xyz"])
+                                   seed=ctx.cfg.seed, progress=ctx.progress)
+    dewarp.save(ctx.out / "dewarp.npz", uvz=obs["uvz"], xyz=obs["xyz"])
     return {"dewarp_rms_mm": float(dewarp.rms_mm), "markers": int(len(obs["xyz"]))}
 
 
@@ -204,7 +265,7 @@ def stage_render(ctx: StageContext) -> dict:
     truth = _truth(ctx)
     d_mm = truth["diameters_um"] * 1e-3
     meta = {"camera": cfg.camera.model_dump(), "spp": r.spp, "seed": cfg.seed, **kw}
-    seed = render_seed(cfg.seed, camera="backlit", frame=-1)
+    seed = render_seed(cfg.seed, camera="backlit_white", frame=0)
     white = render_backlit(sensor, np.zeros((0, 3)), [], spp=r.spp, seed=seed, **kw)
     write_exr(ctx.out / "white.exr", white, {**meta, "frame": "white", "render_seed": seed})
     for k in (0, 1):
@@ -215,15 +276,14 @@ def stage_render(ctx: StageContext) -> dict:
 
 
 def stage_detect(ctx: StageContext) -> dict:
-    from mitpiv.analysis.backlit import hybrid_detect
+    from mitpiv.analysis.backlit import Dewarp, hybrid_detect
     from mitpiv.io import read_exr
-    from mitpiv.io.backlit import read_dewarp, write_detections
     from mitpiv.lightfield import decode, focal_stack
-    from mitpiv.render.backlit import stack_pixels
+    from mitpiv.lightfield.refocus import stack_pixels
 
     d = ctx.cfg.detection
     cam = _camera(backlit_sensor(ctx.cfg.camera))
-    dewarp = read_dewarp(ctx.input("calibrate", "dewarp.npz"))
+    dewarp = Dewarp.load(ctx.input("calibrate", "dewarp.npz"))
     z = np.linspace(*d.z_range_mm, d.planes)
     white = read_exr(ctx.input("render", "white.exr"))[0]
     bg = focal_stack(decode(white, optics=cam, white=white), z)
@@ -234,27 +294,25 @@ def stage_detect(ctx: StageContext) -> dict:
         det = hybrid_detect(stack, z, background=bg, dewarp=dewarp, threshold=d.threshold, min_area_px=d.min_area_px,
                             split_touching=d.split_touching, min_separation_px=d.min_separation_px,
                             pixel_to_stack=functools.partial(stack_pixels, lf))
-        write_detections(ctx.out / f"detections_{k}.npz", det,
-                         min_map=(stack / np.maximum(bg, 1e-12)).min(axis=0).astype(np.float32))
+        det.save(ctx.out / f"detections_{k}.npz", min_map=(stack / np.maximum(bg, 1e-12)).min(axis=0))
         result[f"frame{k}"] = {"n_found": len(det)}
     return result
 
 
 def stage_evaluate(ctx: StageContext) -> dict:
-    from mitpiv.analysis.backlit import evaluate_detections, match_frames
-    from mitpiv.io.backlit import read_detections
-    from mitpiv.io.records import write_arrays
+    from mitpiv.analysis.backlit import BacklitDetections, evaluate_detections, match_frames
+    from mitpiv.io import write_npz
 
     truth = _truth(ctx)
     d_true, v_true = truth["diameters_um"] * 1e-3, truth["velocities_mm_s"]
     view = (0.0, 0.0, -1.0)  # the camera looks along -z
     dets, result, to_truth = [], {}, []
     for k in (0, 1):
-        det = read_detections(ctx.input("detect", f"detections_{k}.npz"))
+        det = BacklitDetections.load(ctx.input("detect", f"detections_{k}.npz"))
         ev = evaluate_detections(det, truth["positions_mm"][k], d_true, axis=view)
         pairs = ev.pop("pairs")
-        write_arrays(ctx.out / f"errors_{k}.npz", pairs=pairs, depth_error_diameters=ev.pop("depth_error_diameters"),
-                     size_error_mm=ev.pop("size_error_mm"))
+        write_npz(ctx.out / f"errors_{k}.npz", {"pairs": pairs, "depth_error_diameters": ev.pop("depth_error_diameters"),
+                                                "size_error_mm": ev.pop("size_error_mm")})
         m = np.full(len(det), -1)
         m[pairs[:, 0]] = pairs[:, 1]
         dets.append(det)
@@ -277,8 +335,8 @@ def stage_evaluate(ctx: StageContext) -> dict:
         "n": n_pairs, "n_correct": int(correct.sum()), "tracked_fraction": float(correct.sum()) / len(d_true),
         "outlier_ratio": float(1.0 - correct.sum() / n_pairs) if n_pairs else nan, "radius_mm": radius,
         "units": "mm/s"}
-    write_arrays(ctx.out / "tracks.npz", pairs=tr["pairs"], correct=correct, velocity_mm_s=tr["velocity_mm_s"],
-                 truth_index=ia)
+    write_npz(ctx.out / "tracks.npz", {"pairs": tr["pairs"], "correct": correct, "velocity_mm_s": tr["velocity_mm_s"],
+                                       "truth_index": ia})
     return result
 
 

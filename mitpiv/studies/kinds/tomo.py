@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, model_validator
 
 from mitpiv.errors import ConfigError
 from mitpiv.studies.runner import Kind, Stage, StageContext
@@ -372,7 +372,6 @@ def volume(run: Path, frame: int):
 def stage_evaluate(ctx: StageContext) -> dict:
     from mitpiv import analysis
     from mitpiv.io import read_truth
-    from mitpiv.io.matches import write_matches
 
     cfg = ctx.cfg
     p = cfg.particles
@@ -383,7 +382,7 @@ def stage_evaluate(ctx: StageContext) -> dict:
         metrics[f"frame{frame}"], res = analysis.evaluate_volume(
             volume(ctx.run_dir, frame), grid, truth["positions_mm"][frame], method=p.method,
             threshold_rel=p.threshold_rel, radius_voxels=p.radius_voxels)
-        write_matches(ctx.out / f"matches_{frame}.npz", res)
+        res.save(ctx.out / f"matches_{frame}.npz")
     return metrics
 
 
