@@ -44,7 +44,7 @@ def set_variant(name: str | None = None) -> str:
     return _set(name)
 
 
-def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0, progress=True, sensors=None):
+def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0, progress=None, sensors=None):
     """Render every sensor of ``scene`` for each frame to EXR + PNG; see :mod:`mitpiv.render.render`."""
     from mitpiv.render.variant import ensure_variant
 

@@ -37,7 +37,8 @@ def cmd_render(args) -> int:
     import mitpiv
 
     files = mitpiv.render_scene(
-        args.scene, out_dir=args.out, frames=args.frames, params=_parse_define(args.define), spp=args.spp, seed=args.seed
+        args.scene, out_dir=args.out, frames=args.frames, params=_parse_define(args.define), spp=args.spp, seed=args.seed,
+        progress=_progress(args),
     )
     print(f"wrote {len(files)} EXR file(s) to {args.out}")
     return 0
@@ -55,7 +56,7 @@ def cmd_info(args) -> int:
 def cmd_sensor(args) -> int:
     from pathlib import Path
 
-    from mitpiv.imaging import SensorModel, apply_sensor
+    from mitpiv.imaging import SensorModel, apply_sensor_set
     from mitpiv.io import read_exr
     from mitpiv.io.counts import write_counts
 
@@ -66,12 +67,21 @@ def cmd_sensor(args) -> int:
         gaussian_noise_percent=args.noise_percent, bit_depth=args.bit_depth,
     )
     inputs = [(Path(f), *read_exr(f)) for f in args.files]  # read everything before writing anything
+    # one exposure for the whole set (scene-wide), one noise stream per (camera, frame)
+    images, where = {}, {}
+    for path, img, meta in inputs:
+        key = (str(meta.get("sensor_id") or path.stem), int(meta.get("frame") or 0))
+        if key in images:
+            raise MitpivError(f"sensor: {path} and {where[key]} are both camera {key[0]!r}, frame {key[1]}; give each "
+                              f"(camera, frame) once.")
+        images[key], where[key] = img if img.ndim == 2 else img[..., 0], path
+    res = apply_sensor_set(images, model, seed=args.seed, progress=_progress(args))
     out = Path(args.out)
-    for k, (path, img, meta) in enumerate(inputs):
-        counts = apply_sensor(img if img.ndim == 2 else img[..., 0], model, seed=args.seed + k)
+    for path, _, meta in inputs:
+        key = (str(meta.get("sensor_id") or path.stem), int(meta.get("frame") or 0))
         target = out / f"{path.stem}.{args.format}"
-        write_counts(target, counts, {**meta, "sensor_model": model.to_dict(), "sensor_seed": args.seed + k})
-        print(f"[{k + 1}/{len(inputs)}] {path} -> {target} ({counts.dtype}, max {int(counts.max())})", file=sys.stderr)
+        write_counts(target, res.counts[key], {**meta, "sensor_model": res.metadata(key)})
+    print(f"{len(inputs)} image(s), exposure {res.exposure:.4g} photons per unit radiance -> {out}")
     return 0
 
 
@@ -374,6 +384,7 @@ def _flag_kwargs(key: str) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="mitpiv", description="Physically based rendering testbed for volumetric PIV.")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bars or progress messages")
+    p.add_argument("--verbose", "-v", action="store_true", help="debug messages (every step of long loops)")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render every sensor of a scene XML for each frame to EXR + PNG")
     r.add_argument("scene", help="scene XML file")
@@ -501,8 +512,11 @@ def main(argv=None) -> int:
 
     if args.quiet:
         set_quiet(True)
-    logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO, format="%(message)s",
-                        stream=sys.stderr)
+    level = logging.WARNING if args.quiet else (logging.DEBUG if args.verbose else logging.INFO)
+    logging.basicConfig(level=level, format="%(message)s", stream=sys.stderr)
+    logging.getLogger("mitpiv").setLevel(level)
+    for noisy in ("distributed", "numba", "matplotlib", "PIL"):  # other libraries stay at warnings
+        logging.getLogger(noisy).setLevel(max(level, logging.WARNING))
     try:
         return args.func(args)
     except MitpivError as e:

@@ -128,7 +128,7 @@ def _truth_info(xml_path: Path, params: dict) -> tuple[str | None, np.ndarray | 
     return None, None
 
 
-def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0, progress=True,
+def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0, progress=None,
                  sensors=None) -> list[Path]:
     """Render every sensor of a scene XML for each frame.
 

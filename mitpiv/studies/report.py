@@ -231,7 +231,7 @@ def backlit_report(cfg, run_dir, results: dict, timings: dict) -> Report:
     det = read_detections(run / "detect" / "detections_0.npz")
     errors = read_npz(run / "evaluate" / "errors_0.npz")
     figures = {"images.png": _backlit_images(raw, det),
-               "errors.png": _backlit_errors(errors, truth["diameters_um"] * 1e-3)}
+               "errors.png": _backlit_errors(errors, truth["diameters_um"] / 1e3)}
     ev = results["evaluate"]
     cal = results["calibrate"]
     lines = [f"# {cfg.name}: backlit plenoptic droplet tracking", "",

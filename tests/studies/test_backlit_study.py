@@ -33,7 +33,7 @@ def test_backlit_run_measures_droplets_and_tracks(run):
     assert m["kind"] == "backlit" and m["n_particles"] > 10
     assert m["dewarp_rms_mm"] < 0.005  # dot card fit residual below a tenth of a refocused pixel (55 um)
     truth = read_truth(out / "field" / "truth.npz")
-    d = truth["diameters_um"] * 1e-3
+    d = truth["diameters_um"] / 1e3
     ev = m["evaluate"]["frame0"]
     e = np.load(out / "evaluate" / "errors_0.npz")
     found = np.zeros(d.size, bool)

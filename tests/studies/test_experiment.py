@@ -134,6 +134,40 @@ def test_sensor_stage(tmp_path):
     assert meta["sensor"]["bit_depth"] == 8 and np.all(img == np.round(img)) and img.max() <= 255
 
 
+def test_sensor_stage_is_scene_wide_with_independent_streams(tmp_path):
+    """The sensor stage takes one exposure for all cameras and frames (mean counts keep the
+    rendered brightness ratios; before, each image was scaled to its own peak) and one
+    noise stream per (camera, frame): the shot-noise fields of two cameras are
+    uncorrelated, a rerun in another folder is bit-identical."""
+    from mitpiv.io import read_exr
+    from mitpiv.studies import load_experiment, run_config
+
+    exp = write(tmp_path, BASE + "\n[sensor]\npeak_photons = 4000\nshot_noise = true\n")
+    cfg = load_experiment(exp)
+    run_config(cfg, tmp_path / "a", until="sensor")
+    run_config(cfg, tmp_path / "b", until="sensor")
+    rendered, counts, seeds = {}, {}, set()
+    for f in sorted((tmp_path / "a" / "sensor").glob("*.exr")):
+        c, meta = read_exr(f)
+        r, _ = read_exr(tmp_path / "a" / "render" / f.name)
+        rendered[f.name], counts[f.name] = r.astype(np.float64), c.astype(np.float64)
+        seeds.add(meta["sensor"]["sensor_seed"])
+        np.testing.assert_array_equal(c, read_exr(tmp_path / "b" / "sensor" / f.name)[0])  # bit-identical rerun
+        exposure = meta["sensor"]["exposure_used_photons_per_unit"]
+    assert len(seeds) == len(counts) == 8  # 4 cameras x 2 frames, each its own stream
+    peak = max(r.max() for r in rendered.values())
+    assert exposure == pytest.approx(4000 / peak, rel=1e-12)
+    names = sorted(rendered)
+    # mean counts = exposure x mean radiance for every image (Poisson: 5 standard errors)
+    for n in names:
+        expected = exposure * rendered[n].sum()
+        assert abs(counts[n].sum() - expected) < 5 * np.sqrt(expected), n
+    # shot-noise residuals of two cameras are uncorrelated: |r| < 5 / sqrt(N)
+    res = [(counts[n] - exposure * rendered[n]).ravel() for n in names[:2]]
+    r = np.corrcoef(res[0], res[1])[0, 1]
+    assert abs(r) < 5 / np.sqrt(res[0].size), r
+
+
 @pytest.mark.parametrize("text, match", [
     (BASE.replace(f'xml = "{SCENE}"', 'xml = "missing.xml"'), "does not exist"),
     (BASE + "\n[plot]\nx = 1\n", "unknown key"),

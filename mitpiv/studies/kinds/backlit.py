@@ -263,7 +263,7 @@ def stage_render(ctx: StageContext) -> dict:
     kw = {"backlight_mm": r.backlight_mm, "backlight_size_mm": r.backlight_size_mm}
     sensor = backlit_sensor(cfg.camera)
     truth = _truth(ctx)
-    d_mm = truth["diameters_um"] * 1e-3
+    d_mm = truth["diameters_um"] / 1e3
     meta = {"camera": cfg.camera.model_dump(), "spp": r.spp, "seed": cfg.seed, **kw}
     seed = render_seed(cfg.seed, camera="backlit_white", frame=0)
     white = render_backlit(sensor, np.zeros((0, 3)), [], spp=r.spp, seed=seed, **kw)
@@ -304,7 +304,7 @@ def stage_evaluate(ctx: StageContext) -> dict:
     from mitpiv.io import write_npz
 
     truth = _truth(ctx)
-    d_true, v_true = truth["diameters_um"] * 1e-3, truth["velocities_mm_s"]
+    d_true, v_true = truth["diameters_um"] / 1e3, truth["velocities_mm_s"]
     view = (0.0, 0.0, -1.0)  # the camera looks along -z
     dets, result, to_truth = [], {}, []
     for k in (0, 1):

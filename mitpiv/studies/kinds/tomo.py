@@ -259,6 +259,7 @@ def count_for_density(cfg, out: Path) -> int:
     from mitpiv.physics.seeding import count_for_density as count
     from mitpiv.render.render import sensor_model
     from mitpiv.render.scene import load_scene
+    from mitpiv.streams import derived_seed
 
     s = cfg.seeding
     # the scene reads particles_$frame.ply beside itself: a one-particle placeholder to load it
@@ -282,7 +283,9 @@ def count_for_density(cfg, out: Path) -> int:
         raise ConfigError(f"experiment: [seeding] particles_per_microlens needs a plenoptic density_sensor; "
                           f"{wanted!r} is a {type(camera).__name__}. Use ppp for pinhole cameras.")
     try:
-        return count(camera, s.box_min_mm, s.box_max_mm, ppp=ppp, particles_per_microlens=ppm, seed=cfg.seed)
+        # the visible fraction's Monte Carlo points: a stream of their own, not the seeding's
+        return count(camera, s.box_min_mm, s.box_max_mm, ppp=ppp, particles_per_microlens=ppm,
+                     seed=derived_seed(cfg.seed, "density", wanted))
     except ConfigError as e:
         raise ConfigError(f"experiment: [seeding] density sensor {wanted!r}: {e}") from None
 
@@ -324,7 +327,7 @@ def stage_sensor(ctx: StageContext) -> dict:
     res = apply_sensor_set(rendered, model, seed=cfg.seed, progress=ctx.progress)
     for key, c in res.counts.items():
         write_exr(ctx.out / names[key], np.asarray(c, dtype=np.float32),
-                  {**metas[key], "sensor": model.to_dict(), **res.metadata(key)})
+                  {**metas[key], "sensor": res.metadata(key)})
     return {"exposure": res.exposure, "scene_peak": res.scene_peak, "noise_peak_counts": res.noise_peak_counts}
 
 
