@@ -142,7 +142,7 @@ def cmd_refocus(args) -> int:
 
 
 def _grid_from_args(args):
-    from mitpiv.reconstruct import VoxelGrid
+    from mitpiv.grid import VoxelGrid
 
     b = args.bounds
     return VoxelGrid.from_bounds((b[0], b[2], b[4]), (b[1], b[3], b[5]),
@@ -356,12 +356,12 @@ def _progress(args) -> bool:
 def _schema_field(key: str):
     """The FieldInfo of a dotted experiment key in the tomo schema (a union's first member)."""
     from mitpiv.studies.kinds.tomo import schema
-    from mitpiv.studies.schema import _models_in
+    from mitpiv.studies.schema import models_in
 
     node = schema()
     *tables, name = key.split(".")
     for t in tables:
-        node = _models_in(node.model_fields[t].annotation)[0]
+        node = models_in(node.model_fields[t].annotation)[0]
     return node.model_fields[name]
 
 

@@ -323,12 +323,12 @@ def focal_stack(hologram, z_mm, *, pixel_um=None, wavelength_nm=None, background
     """Amplitude of the hologram reconstructed at each distance ``z_mm`` from the sensor:
     (n_z, H, W) float32 (1 = background). ``out``: stream into this ``.npy`` file (memory
     map) for stacks larger than memory."""
-    from mitpiv.lightfield.refocus import _output
+    from mitpiv.io.arrays import stack_output
 
     img = hologram.image if isinstance(hologram, Hologram) else np.asarray(hologram)
     z = np.atleast_1d(np.asarray(z_mm, dtype=np.float64))
     t0 = time.perf_counter()
-    with _output((z.size,) + tuple(img.shape), out, "focal_stack") as stack:
+    with stack_output((z.size,) + tuple(img.shape), out, "focal_stack") as stack:
         planes = iter_planes(hologram, z, pixel_um=pixel_um, wavelength_nm=wavelength_nm, background=background, pad=pad)
         for k, plane in track(planes, total=z.size, desc="hologram focal stack: planes", progress=progress, unit="plane"):
             stack[k] = np.abs(plane)

@@ -5,7 +5,9 @@ and of a study's own arrays (match pairs, tracks)."""
 from __future__ import annotations
 
 import json
+import math
 import zipfile
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +15,10 @@ import numpy as np
 from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.io.atomic import atomic_path
 
-__all__ = ["write_npz", "read_npz"]
+__all__ = ["write_npz", "read_npz", "stack_output", "MAX_IN_MEMORY_BYTES"]
+
+#: Largest stack kept in memory [bytes]; larger ones must stream to a file.
+MAX_IN_MEMORY_BYTES = 2 * 1024**3
 
 
 def write_npz(path, arrays: dict, *, compressed: bool = True, owner: str = "write_npz") -> Path:
@@ -84,3 +89,27 @@ def json_entry(arrays: dict, key: str, path, *, default=None):
         return json.loads(str(arrays[key]))
     except json.JSONDecodeError as e:
         raise FileFormatError(f"{str(path)!r}: entry {key!r} is not valid JSON ({e}).") from None
+
+
+@contextmanager
+def stack_output(shape, out=None, what: str = "stack"):
+    """Yield the float32 array of ``shape`` that a stack (focal stack, refocused volume) is
+    written into: in memory, or with ``out`` a memory map of a temporary ``.npy`` beside
+    ``out`` that replaces it only once complete (a failed run leaves nothing). ``what``
+    names the caller in errors. In-memory results above 2 GiB are refused: stream them."""
+    if out is None:
+        nbytes = 4 * math.prod(shape)
+        if nbytes > MAX_IN_MEMORY_BYTES:
+            raise ConfigError(f"{what}: the result needs {nbytes / 1024**3:.1f} GiB; give out='result.npy' to stream it to disk.")
+        yield np.empty(shape, np.float32)
+        return
+    path = Path(out)
+    if path.suffix != ".npy":
+        raise ConfigError(f"{what}: 'out' must be a .npy file, got {str(path)!r}.")
+    with atomic_path(path, suffix=".npy") as tmp:
+        arr = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=shape)
+        try:
+            yield arr
+            arr.flush()
+        finally:
+            del arr

@@ -22,14 +22,12 @@ from __future__ import annotations
 import logging
 import math
 import time
-from contextlib import contextmanager
-from pathlib import Path
 
 import numpy as np
 
 from mitpiv._numba import numba
 from mitpiv.errors import ConfigError
-from mitpiv.io.atomic import atomic_path
+from mitpiv.io.arrays import stack_output
 from mitpiv.lightfield.decode import LightField
 from mitpiv.lightfield.geometry import alpha_from_z, z_from_alpha
 from mitpiv.progress import Progress, track
@@ -39,7 +37,6 @@ __all__ = ["refocus", "focal_stack", "refocus_volume", "grid_steps", "METHODS"]
 log = logging.getLogger(__name__)
 
 METHODS = ("additive", "multiplicative")
-_MAX_IN_MEMORY = 2 * 1024**3  # bytes: larger stacks must stream to a file
 _EPS = 1e-6  # grid units: samples this close outside the border count as on it
 
 
@@ -145,28 +142,6 @@ def _kernels():
 
     _KERNELS.update(plane=plane, points=points)
     return _KERNELS
-
-
-@contextmanager
-def _output(shape, out, what):
-    """Yield the float32 array a stack is written into: in memory, or (``out``) a memory map
-    of a temporary ``.npy`` beside ``out`` that replaces it only once complete."""
-    if out is None:
-        nbytes = 4 * math.prod(shape)
-        if nbytes > _MAX_IN_MEMORY:
-            raise ConfigError(f"{what}: the result needs {nbytes / 1024**3:.1f} GiB; give out='result.npy' to stream it to disk.")
-        yield np.empty(shape, np.float32)
-        return
-    path = Path(out)
-    if path.suffix != ".npy":
-        raise ConfigError(f"{what}: 'out' must be a .npy file, got {str(path)!r}.")
-    with atomic_path(path, suffix=".npy") as tmp:
-        arr = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=shape)
-        try:
-            yield arr
-            arr.flush()
-        finally:
-            del arr
 
 
 def _check_method(method):
@@ -292,7 +267,7 @@ def focal_stack(lf: LightField, z_mm, *, method: str = "additive", magnification
     shape = (len(z), len(lf.t_px), len(lf.s_px))
     kern = _kernels()["plane"]
     t0 = time.perf_counter()
-    with _output(shape, out, "focal_stack") as stack:
+    with stack_output(shape, out, "focal_stack") as stack:
         planes = track(enumerate(zip(z, alphas, strict=True)), total=len(z), desc="focal stack: planes",
                        progress=progress, unit="plane")
         for k, (zk, ak) in planes:
@@ -330,7 +305,7 @@ def refocus_volume(lf: LightField, x_mm, y_mm, z_mm, *, method: str = "additive"
     sc = o.image_scale / pp  # MLA-plane mm -> lattice-image px
     kern = _kernels()["points"]
     yy, xx = np.meshgrid(ys, xs, indexing="ij")
-    with _output(shape, out, "refocus_volume") as stack:
+    with stack_output(shape, out, "refocus_volume") as stack:
         for k, zw in enumerate(track(zs, desc="refocus_volume: planes", progress=progress, unit="plane")):
             loc = o.world_to_local(np.stack([xx, yy, np.full_like(xx, zw)], axis=-1).reshape(-1, 3))
             if np.any(loc[:, 2] <= f):

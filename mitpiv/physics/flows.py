@@ -19,6 +19,7 @@ from scipy.interpolate import RegularGridInterpolator
 from mitpiv.errors import ConfigError, FileFormatError, check_positive
 
 __all__ = [
+    "FLOW_KINDS",
     "Flow",
     "Uniform",
     "SolidBody",
@@ -374,7 +375,10 @@ class GridFlow(Flow):
         return out
 
 
-_KINDS = {c.kind: c for c in (Uniform, SolidBody, LambOseen, Burgers, HillVortex, VortexRing, ABC, RoundJet, GridFlow)}
+#: Every flow kind by its name (the ``kind`` of a [flow] table and of a truth file's flow).
+FLOW_KINDS = {c.kind: c for c in (Uniform, SolidBody, LambOseen, Burgers, HillVortex, VortexRing, ABC, RoundJet,
+                                  GridFlow)}
+_KINDS = FLOW_KINDS
 
 
 def flow_from_dict(d: dict) -> Flow:

@@ -169,7 +169,7 @@ def _inside(uv, image):
 def _project(m, pts):
     """Pixels of world points; points behind the camera go far outside the image."""
     uv = m.project(pts)
-    uv[~m.visible(pts)] = -1e9
+    uv[~m.in_front(pts)] = -1e9
     return uv
 
 
@@ -187,7 +187,7 @@ def _check_coverage(maps, imgs, grid, what):
         seen = any(np.any(_inside(_plane_projections([m], grid, k)[0], im)) for k in ks)
         uv = _project(m, corners)
         if not seen and not np.any(_inside(uv, im)):
-            front = m.visible(corners)
+            front = m.in_front(corners)
             where = ("the grid lies behind it" if not np.any(front) else
                      f"its corners project to u in [{uv[front, 0].min():.0f}, {uv[front, 0].max():.0f}], v in "
                      f"[{uv[front, 1].min():.0f}, {uv[front, 1].max():.0f}] px")

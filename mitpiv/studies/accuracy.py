@@ -98,12 +98,12 @@ class _Scene:
     """The particles, the flow, the cameras and the voxel grid of one size preset."""
 
     def __init__(self, size: str, tmp: Path, seed: int = 0):
+        from mitpiv.grid import VoxelGrid
         from mitpiv.io import write_particles_ply
         from mitpiv.physics.advection import advect
         from mitpiv.physics.camera import PinholeCamera, place_camera
         from mitpiv.physics.flows import flow_from_dict
         from mitpiv.physics.seeding import seed_box
-        from mitpiv.reconstruct import VoxelGrid
 
         self.p = SIZES[size]
         self.tmp = tmp

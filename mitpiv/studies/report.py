@@ -59,50 +59,44 @@ def _timings_table(timings: dict) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- tomo
-def _sensor_images(imgs, files):
+def _image_row(panels, *, size: float = 3.2, axes: bool = False):
+    """A figure writer: one row of images; ``panels`` = [(image, title, imshow keywords)]."""
     def draw(path):
         plt = _plt()
-        fig, axs = plt.subplots(1, len(imgs), figsize=(3.2 * len(imgs), 3.2), squeeze=False)
-        for ax, img, f in zip(axs[0], imgs, files, strict=True):
-            ax.imshow(img, cmap="gray", vmax=np.percentile(img, 99.9) or None)
-            ax.set_title(f.stem, fontsize=8)
-            ax.axis("off")
+        fig, axs = plt.subplots(1, len(panels), figsize=(size * len(panels), size), squeeze=False)
+        for ax, (img, title, kw) in zip(axs[0], panels, strict=True):
+            ax.imshow(img, **kw)
+            ax.set_title(title, fontsize=9)
+            if not axes:
+                ax.axis("off")
         fig.tight_layout()
         save_figure(fig, path)
 
     return draw
+
+
+def _top(img, q: float) -> float | None:
+    """The colour-scale maximum: the q-th percentile (a few bright pixels would hide the rest)."""
+    return float(np.percentile(img, q)) or None
+
+
+def _sensor_images(imgs, files):
+    return _image_row([(img, f.stem, {"cmap": "gray", "vmax": _top(img, 99.9)}) for img, f in zip(imgs, files,
+                                                                                                    strict=True)])
 
 
 def _volume_projections(vol):
-    def draw(path):
-        plt = _plt()
-        fig, axs = plt.subplots(1, 2, figsize=(9, 4))
-        for ax, proj, title, aspect in ((axs[0], vol.max(axis=0), "frame 0 volume, max along z", "equal"),
-                                        (axs[1], vol.max(axis=1), "max along y", "auto")):
-            # a few bright voxels would hide the rest: the colour scale ends at the 99.5th percentile
-            ax.imshow(proj, cmap="magma", origin="lower", aspect=aspect,
-                      vmax=float(np.percentile(proj, 99.5)) or None)
-            ax.set_title(title)
-        fig.tight_layout()
-        save_figure(fig, path)
-
-    return draw
+    pz, py = vol.max(axis=0), vol.max(axis=1)
+    return _image_row([(pz, "frame 0 volume, max along z", {"cmap": "magma", "origin": "lower", "aspect": "equal",
+                                                            "vmax": _top(pz, 99.5)}),
+                       (py, "max along y", {"cmap": "magma", "origin": "lower", "aspect": "auto",
+                                            "vmax": _top(py, 99.5)})], size=4.5, axes=True)
 
 
 def _volume_slices(vol, grid):
-    def draw(path):
-        plt = _plt()
-        ks = np.linspace(0, vol.shape[0] - 1, 5).round().astype(int)
-        fig, axs = plt.subplots(1, len(ks), figsize=(3.0 * len(ks), 3.2))
-        top = float(np.percentile(vol, 99.9)) or None
-        for ax, k in zip(axs, ks, strict=True):
-            ax.imshow(vol[k], cmap="magma", origin="lower", vmax=top)
-            ax.set_title(f"z = {grid.z_mm[k]:+.2f} mm", fontsize=9)
-            ax.axis("off")
-        fig.tight_layout()
-        save_figure(fig, path)
-
-    return draw
+    ks = np.linspace(0, vol.shape[0] - 1, 5).round().astype(int)
+    kw = {"cmap": "magma", "origin": "lower", "vmax": _top(vol, 99.9)}
+    return _image_row([(vol[k], f"z = {grid.z_mm[k]:+.2f} mm", kw) for k in ks], size=3.0)
 
 
 def _mosaic(raw_file):

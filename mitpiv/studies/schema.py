@@ -27,7 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 from mitpiv.errors import ConfigError
 
 __all__ = ["Table", "Vec3", "model_from_signature", "validate", "format_errors", "parse_value", "set_dotted",
-           "apply_overrides", "describe", "read_toml", "discriminated"]
+           "apply_overrides", "describe", "read_toml", "discriminated", "models_in"]
 
 
 class Table(BaseModel):
@@ -197,7 +197,7 @@ def format_errors(exc: ValidationError, model: type[BaseModel], raw: Mapping, *,
                 where = f"[{key}] {ctx.get('discriminator', 'kind').strip(chr(39))}"
             lines.append(f"{where}: {bad!r} is not a valid choice; choose one of {choices}.")
         elif kind == "union_tag_not_found":
-            members = _models_in(parent.model_fields[key].annotation) if parent is not None else []
+            members = models_in(parent.model_fields[key].annotation) if parent is not None else []
             tags = [t for m in members for t in typing.get_args(m.model_fields["kind"].annotation)]
             names = sorted({n for m in members for n in m.model_fields})
             table_raw = value if isinstance(value, Mapping) else {}
@@ -336,7 +336,7 @@ def describe(model: type[BaseModel], *, title: str | None = None) -> str:
     top = []
     sections = []
     for name, fi in model.model_fields.items():
-        sub = [m for m in _models_in(fi.annotation)]
+        sub = [m for m in models_in(fi.annotation)]
         if sub:
             for m in sub:
                 tag = m.model_fields.get("kind")
@@ -360,10 +360,11 @@ def _row(name, fi) -> str:
            f"{_range(fi)} | {desc} |"
 
 
-def _models_in(ann) -> list[type[BaseModel]]:
+def models_in(ann) -> list[type[BaseModel]]:
+    """The pydantic models in an annotation (a model, an optional one, a union's members)."""
     if inspect.isclass(ann) and issubclass(ann, BaseModel):
         return [ann]
     out = []
     for a in typing.get_args(ann):
-        out += _models_in(a)
+        out += models_in(a)
     return out

@@ -52,3 +52,21 @@ def window_stats(img, uv, half=4):
         s = img[m].sum()
         out.append((s, (img * xx)[m].sum() / s, (img * yy)[m].sum() / s))
     return np.array(out)
+
+
+def particle_scene_xml(sensors: str, *, integrator: str = '<integrator type="particle_tracer"/>',
+                       laser: str = '<float name="thickness" value="3"/>', defaults: str = "") -> str:
+    """A scene XML of tracer particles (``particles_$frame.ply`` beside it) in a 3 mm laser
+    sheet, traced by ``integrator``, seen by the ``sensors`` XML."""
+    return f"""<scene version="3.0.0">
+    <default name="frame" value="0"/>{defaults}
+    {integrator}
+    <emitter type="laser_sheet" id="laser">{laser}</emitter>
+    <shape type="ellipsoidsmesh">
+        <string name="filename" value="particles_$frame.ply"/>
+        <float name="extent" value="1"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
+        <emitter type="tracer_particles"><ref name="sheet" id="laser"/></emitter>
+    </shape>
+{sensors}</scene>
+"""

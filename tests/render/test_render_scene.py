@@ -17,21 +17,9 @@ from mitpiv.errors import ConfigError
 from mitpiv.io import read_exr, write_particles_ply, write_truth
 from mitpiv.render.scene import load_scene
 
-SCENE = """<scene version="3.0.0">
-    <default name="frame" value="0"/>
-    <default name="resolution" value="32"/>
-    <integrator type="particle_tracer"/>
-    <emitter type="laser_sheet" id="laser">
-        <float name="thickness" value="3"/>
-        <float name="wavelength_nm" value="532"/>
-    </emitter>
-    <shape type="ellipsoidsmesh">
-        <string name="filename" value="particles_$frame.ply"/>
-        <float name="extent" value="1"/>
-        <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
-        <emitter type="tracer_particles"><ref name="sheet" id="laser"/></emitter>
-    </shape>
-    <sensor type="distorted_pinhole" id="camA">
+from .helpers import particle_scene_xml
+
+SCENE = particle_scene_xml("""    <sensor type="distorted_pinhole" id="camA">
         <float name="azimuth_deg" value="30"/>
         <float name="elevation_deg" value="50"/>
         <float name="distance_mm" value="600"/>
@@ -44,8 +32,8 @@ SCENE = """<scene version="3.0.0">
             <string name="pixel_format" value="luminance"/>
         </film>
     </sensor>
-</scene>
-"""
+""", laser='<float name="thickness" value="3"/><float name="wavelength_nm" value="532"/>',
+                           defaults='\n    <default name="resolution" value="32"/>')
 TIMES = [0.0, 0.004]
 
 

@@ -12,7 +12,7 @@ from mitpiv.io import read_exr, write_particles_ply
 from mitpiv.render.render import render_scene
 from mitpiv.render.scene import load_scene
 
-from .helpers import camera, render, scene
+from .helpers import camera, particle_scene_xml, render, scene
 
 _SENSOR = """    <sensor type="distorted_pinhole" id="{sid}">
         <float name="azimuth_deg" value="{az}"/>
@@ -36,18 +36,8 @@ def _xml(tmp_path, lens=THIN_LENS):
     for k in (0, 1):
         write_particles_ply(tmp_path / f"particles_{k}.ply", rng.uniform(-1.5, 1.5, (40, 3)), 1.5, proxy_radius_mm=0.01)
     sensors = "".join(_SENSOR.format(sid=s, az=az, lens=lens) for s, az in (("camA", 30), ("camB", -40)))
-    xml = f"""<scene version="3.0.0">
-    <default name="frame" value="0"/>
-    <integrator type="particle_tracer"><integer name="rays_per_particle" value="8"/></integrator>
-    <emitter type="laser_sheet" id="laser"><float name="thickness" value="3"/></emitter>
-    <shape type="ellipsoidsmesh">
-        <string name="filename" value="particles_$frame.ply"/>
-        <float name="extent" value="1"/>
-        <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
-        <emitter type="tracer_particles"><ref name="sheet" id="laser"/></emitter>
-    </shape>
-{sensors}</scene>
-"""
+    xml = particle_scene_xml(sensors, integrator='<integrator type="particle_tracer"><integer '
+                                               'name="rays_per_particle" value="8"/></integrator>')
     path = tmp_path / "scene.xml"
     path.write_text(xml)
     return path

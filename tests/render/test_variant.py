@@ -24,19 +24,11 @@ from mitpiv.render.plugins import PLUGINS
 from mitpiv.render.scene import load_dict, load_scene
 from mitpiv.render.variant import SUPPORTED, ensure_variant
 
+from .helpers import particle_scene_xml
+
 ROOT = Path(__file__).resolve().parents[2]  # the checkout whose mitpiv is under test
 
-SCENE = """<scene version="3.0.0">
-    <default name="frame" value="0"/>
-    <integrator type="particle_tracer"/>
-    <emitter type="laser_sheet" id="laser"><float name="thickness" value="3"/></emitter>
-    <shape type="ellipsoidsmesh">
-        <string name="filename" value="particles_$frame.ply"/>
-        <float name="extent" value="1"/>
-        <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
-        <emitter type="tracer_particles"><ref name="sheet" id="laser"/></emitter>
-    </shape>
-    <sensor type="distorted_pinhole" id="cam">
+SCENE = particle_scene_xml("""    <sensor type="distorted_pinhole" id="cam">
         <float name="azimuth_deg" value="30"/>
         <float name="elevation_deg" value="50"/>
         <float name="distance_mm" value="600"/>
@@ -48,8 +40,7 @@ SCENE = """<scene version="3.0.0">
             <string name="pixel_format" value="luminance"/>
         </film>
     </sensor>
-</scene>
-"""
+""")
 
 # A sensor given by plain numbers (no Mitsuba value, which would need a variant).
 SENSOR = ('{"type": "distorted_pinhole", "azimuth_deg": 0.0, "elevation_deg": 90.0, "distance_mm": 300.0, "focal_length_mm": 50.0, '

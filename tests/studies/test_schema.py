@@ -93,9 +93,9 @@ def test_every_bad_value_names_table_key_value_and_choices(path):
 
 
 def _field_annotation(model, table, key, raw_table):
-    from mitpiv.studies.schema import _models_in
+    from mitpiv.studies.schema import models_in
 
-    members = _models_in(model.model_fields[table].annotation)
+    members = models_in(model.model_fields[table].annotation)
     for m in members:
         kf = m.model_fields.get("kind")
         if kf is None or raw_table.get("kind") in typing.get_args(kf.annotation):
@@ -118,14 +118,14 @@ def test_flow_tables_follow_the_flow_classes():
     the physics it configures cannot drift apart."""
     import inspect
 
-    from mitpiv.physics.flows import _KINDS
+    from mitpiv.physics.flows import FLOW_KINDS
     from mitpiv.studies.kinds.tomo import schema
-    from mitpiv.studies.schema import _models_in
+    from mitpiv.studies.schema import models_in
 
     members = {typing.get_args(m.model_fields["kind"].annotation)[0]: m
-               for m in _models_in(schema().model_fields["flow"].annotation)}
-    assert set(members) == set(_KINDS)
-    for kind, cls in _KINDS.items():
+               for m in models_in(schema().model_fields["flow"].annotation)}
+    assert set(members) == set(FLOW_KINDS)
+    for kind, cls in FLOW_KINDS.items():
         params = set(inspect.signature(cls).parameters)
         assert set(members[kind].model_fields) == params | {"kind", "dt_s"}
 

@@ -88,11 +88,11 @@ class SeedingTable(Table):
 
 @cache
 def _flow_union():
-    from mitpiv.physics.flows import _KINDS
+    from mitpiv.physics.flows import FLOW_KINDS
 
     dt = (PosFloat, Field(..., description="time between the two frames [s]"))
     models = {kind: model_from_signature(f"Flow_{kind}", cls, extra_fields={"dt_s": dt})
-              for kind, cls in _KINDS.items()}
+              for kind, cls in FLOW_KINDS.items()}
     return discriminated(models)
 
 
@@ -216,7 +216,7 @@ def prepare(raw: dict, base_dir: Path) -> dict:
 
 # ------------------------------------------------------------------------------- stages
 def grid_of(cfg):
-    from mitpiv.reconstruct import VoxelGrid
+    from mitpiv.grid import VoxelGrid
 
     b = cfg.reconstruction.bounds_mm
     return VoxelGrid.from_bounds((b[0], b[2], b[4]), (b[1], b[3], b[5]), cfg.reconstruction.voxel_mm)
