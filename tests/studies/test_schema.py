@@ -88,7 +88,7 @@ def test_every_bad_value_names_table_key_value_and_choices(path):
     # flow / field kinds: the valid kinds are listed
     for table in ("flow", "field"):
         if table in tomllib.loads(path.read_text()):
-            with pytest.raises(ConfigError, match=rf"{table}: 'vortexring' is not a valid choice; choose one of"):
+            with pytest.raises(ConfigError, match=rf"\[{table}\] kind: 'vortexring' is not a valid choice; choose one of"):
                 load_experiment(path, {f"{table}.kind": "vortexring"})
 
 
