@@ -517,8 +517,11 @@ def main(argv=None) -> int:
     logging.getLogger("mitpiv").setLevel(level)
     for noisy in ("distributed", "numba", "matplotlib", "PIL"):  # other libraries stay at warnings
         logging.getLogger(noisy).setLevel(max(level, logging.WARNING))
+    from tqdm.contrib.logging import logging_redirect_tqdm
+
     try:
-        return args.func(args)
+        with logging_redirect_tqdm(loggers=[logging.getLogger("mitpiv")]):  # messages print above the bars
+            return args.func(args)
     except MitpivError as e:
         print(f"mitpiv: error: {e}", file=sys.stderr)
         return 2

@@ -4,7 +4,7 @@ planes, sweep points), through one argument that library functions accept.
 ``progress`` may be
 
 - ``None`` or ``False``: silent (the default of library functions);
-- ``True``: a tqdm bar on stderr, unless progress is switched off globally
+- ``True``: a tqdm bar on stderr when it is a terminal, unless progress is switched off globally
   (:func:`set_quiet`, the CLI's ``--quiet``, or ``MITPIV_QUIET=1``, which the test suite sets);
 - a callable ``progress(done, total, desc)``: called after each step (``total`` may be None).
 
@@ -51,7 +51,8 @@ class ProgressBar:
         if progress is True and not quiet():
             from tqdm.auto import tqdm
 
-            self._bar = tqdm(total=total, desc=desc, unit=unit, leave=False, dynamic_ncols=True)
+            # disable=None: no bar when stderr is not a terminal (a log file gets no \r noise)
+            self._bar = tqdm(total=total, desc=desc, unit=unit, leave=False, dynamic_ncols=True, disable=None)
 
     def update(self, n: int = 1) -> None:
         self.done += n

@@ -108,9 +108,15 @@ def test_silent_without_progress_and_when_quiet(name, capfd, monkeypatch):
 
 
 def test_bar_is_drawn_when_asked_for(capfd, monkeypatch):
-    """Positive control of the silence checks: with bars on, the captured stderr shows one."""
+    """Positive control of the silence checks: with bars on and stderr a terminal, the
+    captured stderr shows one; stderr redirected to a file (not a terminal) gets none."""
+    import sys
+
     monkeypatch.setattr(mitpiv.progress, "_quiet", None)
     monkeypatch.setenv("MITPIV_QUIET", "0")
+    CASES["mart"][0](True)
+    assert capfd.readouterr() == ("", "")  # not a terminal: no carriage-return noise in a log
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
     CASES["mart"][0](True)
     out, err = capfd.readouterr()
     assert out == "" and "mart: iterations" in err and "/4 [" in err
