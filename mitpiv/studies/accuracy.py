@@ -384,53 +384,11 @@ def pareto_front(seconds, errors) -> np.ndarray:
     return keep
 
 
-def _plot(rows: list[Row], stage: str, path: Path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from mitpiv.io.atomic import atomic_path
-
-    pts = [r for r in rows if r.stage == stage and not r.knob.startswith("reference") and r.error > 0]
-    if not pts:
-        return None
-    fig, ax = plt.subplots(figsize=(7, 4.6))
-    knobs = list(dict.fromkeys(r.knob for r in pts))
-    for k in knobs:
-        sub = [r for r in pts if r.knob == k]
-        ax.loglog([r.seconds for r in sub], [r.error for r in sub], "o-" if stage != "end_to_end" else "o", label=k)
-        for r in sub:
-            label = r.knob if stage == "end_to_end" else r.value
-            ax.annotate(label, (r.seconds, r.error), textcoords="offset points", xytext=(4, 3), fontsize=7)
-    front = pareto_front([r.seconds for r in pts], [r.error for r in pts])
-    fp = sorted((r.seconds, r.error) for r, f in zip(pts, front, strict=True) if f)
-    ax.plot(*zip(*fp, strict=True), "k--", lw=0.8, alpha=0.6, label="Pareto front")
-    ax.set_xlabel("wall time [s]")
-    ax.set_ylabel(pts[0].metric)
-    ax.set_title(f"{stage}: error against time")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def _markdown(rows: list[Row], size: str, S: _Scene, seconds: float) -> str:
-    lines = [f"# Accuracy versus time ({size})", "",
-             f"{S.p['res']}x{S.p['res']} px cameras, {len(S.positions[0])} particles ({PPP} ppp), grid "
-             f"{'x'.join(map(str, S.grid.shape[::-1]))} voxels of {S.p['voxel']} mm, dt {1e3 * S.dt:.2f} ms "
-             f"(3 voxels at most). Total {seconds:.0f} s.", ""]
-    for stage in STAGES:
-        sub = [r for r in rows if r.stage == stage]
-        if not sub:
-            continue
-        lines += [f"## {stage}", "", f"| knob | value | time [s] | {sub[0].metric} | note |", "|---|---|---|---|---|"]
-        lines += [f"| {r.knob} | {r.value} | {r.seconds:.2f} | {r.error:.3g} | {r.note} |" for r in sub]
-        lines += ["", f"![{stage}](pareto_{stage}.png)", ""]
-    return "\n".join(lines)
+def _intro(size: str, S: _Scene, seconds: float) -> tuple[str, str]:
+    return (f"Accuracy versus time ({size})",
+            f"{S.p['res']}x{S.p['res']} px cameras, {len(S.positions[0])} particles ({PPP} ppp), grid "
+            f"{'x'.join(map(str, S.grid.shape[::-1]))} voxels of {S.p['voxel']} mm, dt {1e3 * S.dt:.2f} ms "
+            f"(3 voxels at most). Total {seconds:.0f} s.")
 
 
 def accuracy_time(out_dir, *, size: str = "full", stages=None, seed: int = 0) -> list[Row]:
@@ -483,7 +441,8 @@ def _write(out: Path, rows: list[Row], stages, size, S, seconds):
             w.writerow(["stage", "knob", "value", "seconds", "error", "metric", "note"])
             for r in rows:
                 w.writerow([r.stage, r.knob, r.value, f"{r.seconds:.4f}", f"{r.error:.6g}", r.metric, r.note])
-    for st in stages:
-        _plot(rows, st, out / f"pareto_{st}.png")
-    with atomic_path(out / "accuracy_time.md", suffix=".md") as tmp:
-        tmp.write_text(_markdown(rows, size, S, seconds))
+    from mitpiv.studies.report import accuracy_report, write
+
+    title, intro = _intro(size, S, seconds)
+    write(accuracy_report(rows, title=title, intro=intro, stages=[st for st in STAGES if st in stages]), out,
+          name="accuracy_time.md")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Report", "write", "tomo_report", "backlit_report", "save_figure", "plot_sweep"]
+__all__ = ["Report", "write", "tomo_report", "backlit_report", "accuracy_report", "save_figure", "plot_sweep"]
 
 
 @dataclass
@@ -41,17 +41,17 @@ def save_figure(fig, path, *, dpi: int = 90) -> None:
     save(fig, path, dpi=dpi)
 
 
-def write(report: Report, out_dir) -> dict:
-    """Write ``report.md`` and every figure of ``report`` into ``out_dir``."""
+def write(report: Report, out_dir, *, name: str = "report.md") -> dict:
+    """Write the Markdown (``name``) and every figure of ``report`` into ``out_dir``."""
     from mitpiv.io.atomic import atomic_path
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    for name, draw in report.figures.items():
-        draw(out / name)
-    with atomic_path(out / "report.md") as tmp:
+    for figure, draw in report.figures.items():
+        draw(out / figure)
+    with atomic_path(out / name) as tmp:
         tmp.write_text(report.markdown)
-    return {"report": "report.md", "figures": list(report.figures)}
+    return {"report": name, "figures": list(report.figures)}
 
 
 def _timings_table(timings: dict) -> list[str]:
@@ -283,3 +283,52 @@ def plot_sweep(table, x: str, y: str, path, *, group: str | None = None) -> None
         ax.legend(fontsize=8)
     fig.tight_layout()
     save_figure(fig, path, dpi=110)
+
+
+# ------------------------------------------------------------------ accuracy versus time
+def _pareto(rows, stage: str):
+    """The log-log error-against-time plot of one stage, its Pareto front dashed."""
+    from mitpiv.studies.accuracy import pareto_front
+
+    pts = [r for r in rows if r.stage == stage and not r.knob.startswith("reference") and r.error > 0]
+
+    def draw(path):
+        plt = _plt()
+        fig, ax = plt.subplots(figsize=(7, 4.6))
+        knobs = list(dict.fromkeys(r.knob for r in pts))
+        for k in knobs:
+            sub = [r for r in pts if r.knob == k]
+            ax.loglog([r.seconds for r in sub], [r.error for r in sub], "o-" if stage != "end_to_end" else "o",
+                      label=k)
+            for r in sub:
+                label = r.knob if stage == "end_to_end" else r.value
+                ax.annotate(label, (r.seconds, r.error), textcoords="offset points", xytext=(4, 3), fontsize=7)
+        front = pareto_front([r.seconds for r in pts], [r.error for r in pts])
+        fp = sorted((r.seconds, r.error) for r, f in zip(pts, front, strict=True) if f)
+        ax.plot(*zip(*fp, strict=True), "k--", lw=0.8, alpha=0.6, label="Pareto front")
+        ax.set_xlabel("wall time [s]")
+        ax.set_ylabel(pts[0].metric)
+        ax.set_title(f"{stage}: error against time")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        save_figure(fig, path, dpi=110)
+
+    return draw if pts else None
+
+
+def accuracy_report(rows, *, title: str, intro: str, stages) -> Report:
+    """The accuracy-versus-time report (:mod:`mitpiv.studies.accuracy`): per stage a table
+    of every knob's setting, time and error, and its Pareto plot."""
+    lines, figures = [f"# {title}", "", intro, ""], {}
+    for stage in stages:
+        sub = [r for r in rows if r.stage == stage]
+        if not sub:
+            continue
+        lines += [f"## {stage}", "", f"| knob | value | time [s] | {sub[0].metric} | note |", "|---|---|---|---|---|"]
+        lines += [f"| {r.knob} | {r.value} | {r.seconds:.2f} | {r.error:.3g} | {r.note} |" for r in sub]
+        lines += ["", f"![{stage}](pareto_{stage}.png)", ""]
+        draw = _pareto(rows, stage)
+        if draw is not None:
+            figures[f"pareto_{stage}.png"] = draw
+    return Report("\n".join(lines), figures)

@@ -220,8 +220,8 @@ def run_stages(cfg: BaseModel, run_dir, stages: list[Stage], *, progress: Progre
                 os.replace(final, old)
             os.replace(tmp, final)
             shutil.rmtree(old, ignore_errors=True)
-            # the result as a reader of stage.json sees it (JSON types)
-            results[st.name] = json.loads(json.dumps(result, default=float))
+            # the result exactly as a rerun reads it back (JSON types)
+            results[st.name] = _record(final)["result"]
             timings[st.name] = seconds
             log.info("[%s] %s: %.1f s", name, st.name, seconds)
             b.update()
