@@ -69,16 +69,15 @@ def cmd_sensor(args) -> int:
     inputs = [(Path(f), *read_exr(f)) for f in args.files]  # read everything before writing anything
     # one exposure for the whole set (scene-wide), one noise stream per (camera, frame)
     images, where = {}, {}
-    for path, img, meta in inputs:
-        key = (str(meta.get("sensor_id") or path.stem), int(meta.get("frame") or 0))
+    keys = [(str(meta.get("sensor_id") or path.stem), int(meta.get("frame") or 0)) for path, _, meta in inputs]
+    for key, (path, img, _) in zip(keys, inputs, strict=True):
         if key in images:
             raise MitpivError(f"sensor: {path} and {where[key]} are both camera {key[0]!r}, frame {key[1]}; give each "
                               f"(camera, frame) once.")
         images[key], where[key] = img if img.ndim == 2 else img[..., 0], path
     res = apply_sensor_set(images, model, seed=args.seed, progress=_progress(args))
     out = Path(args.out)
-    for path, _, meta in inputs:
-        key = (str(meta.get("sensor_id") or path.stem), int(meta.get("frame") or 0))
+    for key, (path, _, meta) in zip(keys, inputs, strict=True):
         target = out / f"{path.stem}.{args.format}"
         write_counts(target, res.counts[key], {**meta, "sensor_model": res.metadata(key)})
     print(f"{len(inputs)} image(s), exposure {res.exposure:.4g} photons per unit radiance -> {out}")

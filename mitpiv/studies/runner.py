@@ -37,7 +37,7 @@ from mitpiv.progress import Progress, bar
 from mitpiv.studies.schema import apply_overrides, read_toml, validate
 
 __all__ = ["Stage", "StageContext", "RunResult", "Kind", "load_experiment", "run_experiment", "run_config",
-           "run_stages", "check_experiment", "SCHEMA_VERSION"]
+           "run_stages", "check_experiment", "content_hash", "SCHEMA_VERSION"]
 
 log = logging.getLogger(__name__)
 
@@ -159,8 +159,9 @@ def check_experiment(path, overrides: Mapping | None = None) -> BaseModel:
 
 
 # ------------------------------------------------------------------------------ stages
-def _hash(obj) -> str:
-    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
+def content_hash(obj, *, length: int = 16) -> str:
+    """A short hex SHA-256 of a JSON-ready object (keys sorted): stage keys, sweep point ids."""
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:length]
 
 
 def _record(stage_dir: Path) -> dict | None:
@@ -191,7 +192,7 @@ def run_stages(cfg: BaseModel, run_dir, stages: list[Stage], *, progress: Progre
     prev = f"v{SCHEMA_VERSION}:{data.get('kind')}"
     with bar(len(stages), desc=f"{name}", progress=progress, unit="stage") as b:
         for st in stages:
-            prev = _hash([prev] + [data.get(t) for t in st.reads])
+            prev = content_hash([prev] + [data.get(t) for t in st.reads])
             final, tmp = run / st.name, run / f".{st.name}.tmp"
             rec = _record(final)
             b.set_description(f"{name}: {st.name}")

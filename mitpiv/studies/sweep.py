@@ -30,9 +30,7 @@ stages).
 
 from __future__ import annotations
 
-import hashlib
 import itertools
-import json
 import logging
 import time
 import traceback
@@ -40,7 +38,7 @@ from pathlib import Path
 
 from mitpiv.errors import ConfigError
 from mitpiv.progress import Progress, bar
-from mitpiv.studies.runner import load_experiment, run_config
+from mitpiv.studies.runner import content_hash, load_experiment, run_config
 from mitpiv.studies.schema import read_toml
 
 log = logging.getLogger(__name__)
@@ -93,7 +91,7 @@ def load_study(path, *, full: bool = False) -> dict:
 
 
 def point_id(overrides: dict) -> str:
-    return hashlib.sha256(json.dumps(overrides, sort_keys=True, default=str).encode()).hexdigest()[:12]
+    return content_hash(overrides, length=12)
 
 
 def flatten(prefix, obj, out):
