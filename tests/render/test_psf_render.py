@@ -25,7 +25,7 @@ FFT_TOL_OF_PEAK = 2e-3  # FFT mode at oversample 9 (catmullrom splat): measured 
 FFT_COARSE_TOL_OF_PEAK = 0.05  # oversample 3: larger error, but bounded
 FFT_TOTAL_REL_TOL = 5e-4  # image totals: the fine and coarse PSF windows truncate different tails (1e-4)
 # Jitter, 65536 rays per particle: Monte Carlo noise of ~1 % of the peak per pixel, so 3 % on
-# the worst pixel; window sums (11 x 11 px) lose only what crosses the window's edge.
+# the worst pixel; window sums (+-5 px) lose only what crosses the window's edge.
 JITTER_TOL_OF_PEAK = 0.03
 JITTER_WINDOW_SUM_RTOL = 5e-3
 N_SIGMA = 5  # centroids: standard errors sqrt(second moment per axis / rays)
