@@ -17,13 +17,17 @@ from mitpiv.io.counts import read_counts, write_counts
 
 SHAPE = (512, 512)
 NPIX = SHAPE[0] * SHAPE[1]
+# Statistical tolerance (module docstring): standard errors allowed for a sample mean, a sample
+# variance, a ratio of means or a Pearson r of independent fields; 5 sigma of a normal statistic
+# is a two-sided p of 5.7e-7 per check. Exact scalings (rel 1e-12 .. 1e-15) stay inline.
+N_SIGMA = 5
 
 
 def _check(x, mean, var, mu4):
     x = np.asarray(x, dtype=float).ravel()
-    assert abs(x.mean() - mean) < 5 * np.sqrt(var / x.size), (x.mean(), mean)
+    assert abs(x.mean() - mean) < N_SIGMA * np.sqrt(var / x.size), (x.mean(), mean)
     se_var = np.sqrt((mu4 - var**2) / x.size)
-    assert abs(x.var(ddof=1) - var) < 5 * se_var, (x.var(ddof=1), var)
+    assert abs(x.var(ddof=1) - var) < N_SIGMA * se_var, (x.var(ddof=1), var)
 
 
 def _poisson_mu4(lam):
@@ -183,10 +187,10 @@ def test_peak_photons_is_one_exposure_for_the_whole_set():
     for key, img in (("fwd", fwd), ("back", back)):
         lam = img * exposure
         c = res.counts[(key, 0)].astype(float)
-        assert abs(c.mean() - lam.mean()) < 5 * np.sqrt(lam.sum()) / lam.size
+        assert abs(c.mean() - lam.mean()) < N_SIGMA * np.sqrt(lam.sum()) / lam.size
         means[key] = c.mean()
     se_ratio = 3 * np.sqrt(1 / (fwd * exposure).sum() + 1 / (back * exposure).sum())  # relative errors in quadrature
-    assert means["fwd"] / means["back"] == pytest.approx(3.0, abs=5 * se_ratio)
+    assert means["fwd"] / means["back"] == pytest.approx(3.0, abs=N_SIGMA * se_ratio)
 
 
 def test_gaussian_noise_percent_has_one_sigma_for_the_whole_set():
@@ -199,7 +203,7 @@ def test_gaussian_noise_percent_has_one_sigma_for_the_whole_set():
         _check(res.counts[(key, 0)] - img, 0.0, sigma**2, 3 * sigma**4)
     # the means keep 3:1 (noise of sigma over N pixels: 5 standard errors of the ratio)
     m_f, m_b = res.counts[("fwd", 0)].mean(), res.counts[("back", 0)].mean()
-    assert m_f / m_b == pytest.approx(3.0, abs=5 * sigma / np.sqrt(NPIX) * np.hypot(1 / m_b, 3 / m_b))
+    assert m_f / m_b == pytest.approx(3.0, abs=N_SIGMA * sigma / np.sqrt(NPIX) * np.hypot(1 / m_b, 3 / m_b))
 
 
 def test_apply_sensor_on_one_image_of_a_set():
@@ -226,7 +230,7 @@ def test_each_camera_and_frame_has_its_own_noise_stream():
     n = _noise_fields(res, images)
     # Independent fields: the sample Pearson r of N pairs has standard deviation 1/sqrt(N);
     # |r| < 5/sqrt(N) fails by chance with probability 6e-7. A shared stream gives r = 1.
-    bound = 5 / np.sqrt(img.size)
+    bound = N_SIGMA / np.sqrt(img.size)
     for a, b in ((("cam0", 0), ("cam1", 0)), (("cam0", 0), ("cam0", 1)), (("cam1", 0), ("cam0", 1))):
         r = np.corrcoef(n[a].ravel(), n[b].ravel())[0, 1]
         assert abs(r) < bound, (a, b, r)

@@ -9,6 +9,10 @@ import pytest
 from mitpiv import streams
 from mitpiv.errors import ConfigError
 
+# Independent streams: the sample Pearson r of n independent pairs has standard deviation
+# 1/sqrt(n); N_SIGMA of them is a two-sided p of 5.7e-7 per pair of streams.
+N_SIGMA = 5
+
 
 def _key_afresh(purpose, camera, frame):
     def h(s):
@@ -46,7 +50,7 @@ def test_two_streams_are_uncorrelated():
     a = streams.generator(1, "sensor", "cam0", 0).standard_normal(n)
     b = streams.generator(1, "sensor", "cam1", 0).standard_normal(n)
     c = streams.generator(1, "sensor", "cam0", 1).standard_normal(n)
-    bound = 5 / np.sqrt(n)  # sample Pearson r of independent pairs: sd 1/sqrt(n)
+    bound = N_SIGMA / np.sqrt(n)  # sample Pearson r of independent pairs: sd 1/sqrt(n)
     assert abs(np.corrcoef(a, b)[0, 1]) < bound and abs(np.corrcoef(a, c)[0, 1]) < bound
 
 

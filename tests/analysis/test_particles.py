@@ -12,6 +12,23 @@ from mitpiv.reconstruct import VoxelGrid
 VOX = 0.05
 GRID = VoxelGrid((0.0, 0.0, 0.0), (VOX, VOX, VOX), (40, 64, 64))
 
+# Tolerances and their provenance; the reference is the exact position of each synthetic
+# particle. Closed forms at rounding (1e-12) stay inline.
+# Sub-voxel localisation of isolated sigma = 1 voxel blobs [voxel]: gauss3 and lsq are exact
+# for a Gaussian up to voxel integration (< 0.01 voxel); a 3^3 centroid of such a blob is
+# pulled towards the voxel centre.
+SUBVOXEL_TOL_VOX = {"gauss3": 0.01, "lsq": 0.01, "centroid": 0.25}
+LSQ_ANISOTROPIC_TOL_VOX = 0.02  # sigma = 1.6 voxel blobs: lsq fits them, the centroid does not
+TOUCHING_PAIR_TOL_VOX = 0.2  # two blobs 2.6 voxels apart keep their positions
+EDGE_TOL_VOX = 0.8  # cut by a face: the integer position on the cut axis
+SATURATED_TOL_VOX = 0.35  # clipped plateaus: their centre
+ASSIGNMENT_COST_ABS_TOL = 1e-9  # total cost vs scipy's linear_sum_assignment: float64 sums
+# Match statistics of 800 particles with known Gaussian errors: the bias within N_SIGMA_BIAS
+# standard errors of the mean; the sample standard deviation of ~640 matches has a relative
+# standard error 1/sqrt(2n) = 2.8 %, so 10 % on u95 = 1.96 sigma is 3.5 of them.
+N_SIGMA_BIAS = 4
+U95_REL_TOL = 0.1
+
 
 def lattice_particles(grid, spacing_vox=8, seed=0):
     """Isolated particles: a lattice with +-1 voxel jitter (no two blobs overlap)."""
@@ -35,15 +52,13 @@ def test_gauss3_exact_for_sampled_gaussian_and_parabola_fallback():
     assert _gauss3(1.0, 1.0, 1.0) == 0.0  # flat top: no offset, no NaN
 
 
-@pytest.mark.parametrize("method, tol", [("gauss3", 0.01), ("lsq", 0.01), ("centroid", 0.25)])
+@pytest.mark.parametrize("method, tol", list(SUBVOXEL_TOL_VOX.items()))
 def test_isolated_particles_subvoxel(method, tol):
     p = lattice_particles(GRID)
     vol = truth_volume(p, GRID, sigma_voxels=1.0)
     found = find_particles(vol, GRID, method=method)
     r = match(found, p, grid=GRID)
     assert r.detection_rate == 1.0 and r.ghost_fraction == 0.0
-    # tolerance: gauss3 and lsq are exact for a Gaussian up to voxel integration (<0.01
-    # voxel); a 3^3 centroid of a sigma = 1 voxel blob is pulled towards the voxel centre
     assert np.all(np.median(np.abs(r.errors_mm), axis=0) / VOX < tol)
     assert np.all(np.abs(r.bias(voxels=True)) < tol)
 
@@ -53,7 +68,7 @@ def test_lsq_fits_anisotropic_blob_better_than_centroid():
     vol = truth_volume(p, GRID, sigma_voxels=1.6)
     err = {m: np.abs(match(find_particles(vol, GRID, method=m), p, grid=GRID).errors_mm).mean() / VOX
            for m in ("centroid", "lsq")}
-    assert err["lsq"] < 0.02 < err["centroid"]
+    assert err["lsq"] < LSQ_ANISOTROPIC_TOL_VOX < err["centroid"]
 
 
 def test_boundary_touching_and_saturated_particles():
@@ -67,8 +82,8 @@ def test_boundary_touching_and_saturated_particles():
     assert r.n_matched == 4 and len(found) == 4
     assert found.edge.sum() == 2
     e = np.abs(r.errors_mm) / VOX
-    assert np.all(e[np.isin(r.pairs[:, 1], [2, 3])] < 0.2)  # the touching pair keeps its positions
-    assert np.all(e < 0.8)  # edge particles keep the integer position on the cut axis
+    assert np.all(e[np.isin(r.pairs[:, 1], [2, 3])] < TOUCHING_PAIR_TOL_VOX)  # the touching pair
+    assert np.all(e < EDGE_TOL_VOX)  # edge particles keep the integer position on the cut axis
     # saturated blobs: clip at half the weakest peak -> one particle per plateau, at its centre
     q = lattice_particles(GRID, seed=5)
     vol = truth_volume(q, GRID, sigma_voxels=1.0)
@@ -77,7 +92,7 @@ def test_boundary_touching_and_saturated_particles():
     found = find_particles(sat, GRID)
     r = match(found, q, grid=GRID)
     assert len(found) == len(q) and r.detection_rate == 1.0 and found.saturated.mean() > 0.9
-    assert np.all(np.abs(r.errors_mm) / VOX < 0.35)
+    assert np.all(np.abs(r.errors_mm) / VOX < SATURATED_TOL_VOX)
     assert np.all(np.isfinite(found.positions_mm))
 
 
@@ -123,7 +138,7 @@ def test_assignment_is_the_optimal_one_to_one_matching():
         r, c = linear_sum_assignment(big)
         ref = big[r, c].sum()
         ours = d.sum() + R * (n - len(pairs)) + R * (m - len(pairs))
-        assert ours == pytest.approx(ref, abs=1e-9)
+        assert ours == pytest.approx(ref, abs=ASSIGNMENT_COST_ABS_TOL)
 
 
 def test_match_statistics_and_grid_restriction(tmp_path):
@@ -141,10 +156,9 @@ def test_match_statistics_and_grid_restriction(tmp_path):
     assert r.detection_rate == pytest.approx(keep.mean(), abs=1e-12)
     assert r.ghost_fraction == pytest.approx(len(ghosts) / (keep.sum() + len(ghosts)), abs=1e-12)
     assert len(ghosts) > 50
-    # tolerance: 4 standard errors of the mean; the std of ~640 samples is within 10 % (3.5 sigma)
-    assert np.all(np.abs(r.bias() - bias) < 4 * sigma / np.sqrt(keep.sum()))
-    np.testing.assert_allclose(r.u95(), 1.96 * sigma, rtol=0.1)
-    np.testing.assert_allclose(r.u95(voxels=True), 1.96 * sigma / VOX, rtol=0.1)
+    assert np.all(np.abs(r.bias() - bias) < N_SIGMA_BIAS * sigma / np.sqrt(keep.sum()))
+    np.testing.assert_allclose(r.u95(), 1.96 * sigma, rtol=U95_REL_TOL)
+    np.testing.assert_allclose(r.u95(voxels=True), 1.96 * sigma / VOX, rtol=U95_REL_TOL)
     s = r.summary()
     assert s["n_matched"] == keep.sum() and len(s["rms_vox"]) == 3
     r.plot(tmp_path / "pdf.png")

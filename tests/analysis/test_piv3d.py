@@ -15,6 +15,31 @@ RNG = np.random.default_rng(1)
 PARTICLES = RNG.uniform(-0.5, 3.7, (5000, 3))  # ~0.02 particles per voxel, blobs sigma 1 voxel
 VOL_A = truth_volume(PARTICLES, GRID, sigma_voxels=1.0)
 
+# Tolerances and their provenance; the reference is the exact displacement of the synthetic
+# particles (uniform shifts, or the analytic flow advected by RK4). Exact identities stay inline.
+# Mean displacement of interior windows, cubic deformation: measured bias < 0.01 voxel (ours
+# < 0.02 voxel against OpenPIV on the same volumes). OpenPIV's single-pass 3D correlation is
+# 0.09-0.16 voxel off here (shared/REFERENCE.md: 0.5 -> 0.41, 2.3 -> 2.18 on 64^3 volumes with
+# 16^3 windows), so this bound also separates the two.
+SHIFT_BIAS_TOL_VOX = 0.03
+CROSS_AXIS_TOL_VOX = 0.01  # mean of the components that should be 0 (measured well below)
+# A 9-voxel shift through a (48, 32, 16) multi-pass chain: median error with the predictor and
+# deformation, and with window shifting alone.
+PREDICTOR_MEDIAN_TOL_VOX = 0.05
+SHIFTING_MEDIAN_TOL_VOX = 0.2
+REPLACED_TOL_VOX = 0.1  # invalid windows filled by the median of neighbours shifted by 1 voxel
+# A Lamb-Oseen vortex: in-plane RMS error against the window-averaged analytic displacement,
+# with velocity gradients over the window.
+VORTEX_RMS_TOL_VOX = 0.06
+# The window-averaged reference converged in its number of samples (4 vs 8 per axis).
+REFERENCE_CONVERGENCE_OF_MAX = 0.01
+# A uniform 1.5-voxel shift, edge windows included (particles leave the volume).
+UNIFORM_RMS_TOL_VOX = 0.06
+UNIFORM_BIAS_TOL_VOX = 0.05
+# Universal outlier detection's replacements against the clean field (the noise is 0.02).
+UOD_REPLACEMENT_TOL_VOX = 0.35
+NORMALISED_PEAK_RTOL = 1e-5  # identical windows: coefficient 1, float32 correlation
+
 
 def shifted(shift_vox, axis):
     d = np.zeros(3)
@@ -30,12 +55,11 @@ def interior(a):
 def test_sign_convention_plus_2_3_voxels_each_axis(axis):
     f = piv3d(VOL_A, shifted(2.3, axis), GRID, windows=(32, 16, 16), overlap=0.5)
     d = f.displacement_vox()
-    # tolerance: interior windows, cubic deformation; measured bias < 0.01 voxel
-    assert interior(d[..., axis]).mean() == pytest.approx(2.3, abs=0.03)
+    assert interior(d[..., axis]).mean() == pytest.approx(2.3, abs=SHIFT_BIAS_TOL_VOX)
     for other in {0, 1, 2} - {axis}:
-        assert abs(interior(d[..., other]).mean()) < 0.01
+        assert abs(interior(d[..., other]).mean()) < CROSS_AXIS_TOL_VOX
     comp = (f.u, f.v, f.w)[axis]
-    assert interior(comp).mean() == pytest.approx(2.3 * VOX, abs=0.03 * VOX)  # mm, dt not given
+    assert interior(comp).mean() == pytest.approx(2.3 * VOX, abs=SHIFT_BIAS_TOL_VOX * VOX)  # mm, dt not given
     assert f.units == "mm" and f.outlier_ratio < 0.03
     # field centres are world mm on the grid: the x coordinates grow along +x
     assert np.all(np.diff(f.x_mm) > 0) and GRID.origin_mm[0] < f.x_mm[0] < f.x_mm[-1] < GRID.upper_mm[0]
@@ -57,7 +81,7 @@ def test_at_least_as_accurate_as_openpiv_3d(shift):
         ours = f.displacement_vox()[..., axis].mean()
         assert f.shape == comps[0].shape  # same 7^3 lattice of 16^3 windows at 50 % overlap
         assert abs(ours - shift) <= abs(theirs - shift)
-        assert abs(ours - shift) < 0.03 < abs(theirs - shift)  # measured: ours < 0.02, OpenPIV 0.09-0.16
+        assert abs(ours - shift) < SHIFT_BIAS_TOL_VOX < abs(theirs - shift)  # measured: ours < 0.02, OpenPIV 0.09-0.16
 
 
 def test_displacement_beyond_a_quarter_window_needs_the_predictor():
@@ -67,10 +91,10 @@ def test_displacement_beyond_a_quarter_window_needs_the_predictor():
     err_single = np.abs(single.displacement_vox()[..., 0] - 9.0)
     err_multi = np.abs(interior(multi.displacement_vox()[..., 0]) - 9.0)
     assert np.median(err_single) > 2.0
-    assert np.median(err_multi) < 0.05 and np.mean(err_multi < 0.2) > 0.95
+    assert np.median(err_multi) < PREDICTOR_MEDIAN_TOL_VOX and np.mean(err_multi < 0.2) > 0.95
     # window shifting (no deformation) also carries the predictor
     shift = piv3d(VOL_A, b, GRID, windows=(48, 32, 16), overlap=0.5, deform=False)
-    assert np.median(np.abs(interior(shift.displacement_vox()[..., 0]) - 9.0)) < 0.2
+    assert np.median(np.abs(interior(shift.displacement_vox()[..., 0]) - 9.0)) < SHIFTING_MEDIAN_TOL_VOX
 
 
 def test_uniform_windows_are_invalid_not_nan_and_get_replaced():
@@ -86,7 +110,7 @@ def test_uniform_windows_are_invalid_not_nan_and_get_replaced():
     g = piv3d(a, b, GRID, windows=(32, 16), overlap=0.5, replace="median")
     assert (~g.valid).sum() > 0
     assert np.all(g.replaced[~g.valid])
-    np.testing.assert_allclose(g.displacement_vox()[~g.valid][:, 2], 1.0, atol=0.1)  # filled from neighbours
+    np.testing.assert_allclose(g.displacement_vox()[~g.valid][:, 2], 1.0, atol=REPLACED_TOL_VOX)  # filled from neighbours
     flat = piv3d(c, c, GRID, windows=16, overlap=0.5)  # every window uniform
     assert not flat.valid.any() and np.all(flat.displacement_vox() == 0) and np.isnan(flat.outlier_ratio)
 
@@ -103,11 +127,11 @@ def test_deformation_and_window_average_reference_on_a_vortex():
     e_def = velocity_error(deform, flow)
     assert deform.units == "mm/s"
     assert e_def["rms_magnitude"] < e_shift["rms_magnitude"]
-    assert max(e_def["rms_vox"][:2]) < 0.06  # in-plane, with velocity gradients over the window
+    assert max(e_def["rms_vox"][:2]) < VORTEX_RMS_TOL_VOX  # in-plane
     # the window-averaged reference: converged in the number of samples, and different from
     # the value at the window centre where the flow curves (the vortex core)
     fine = velocity_error(deform, flow, samples=8)["reference"]
-    np.testing.assert_allclose(e_def["reference"], fine, atol=0.01 * np.abs(fine).max())
+    np.testing.assert_allclose(e_def["reference"], fine, atol=REFERENCE_CONVERGENCE_OF_MAX * np.abs(fine).max())
     centre = advect(deform.points_mm().reshape(-1, 3), flow, dt_s=dt).reshape(fine.shape) - deform.points_mm()
     assert np.abs(centre / dt - fine).max() > 0.05 * np.abs(fine).max()
 
@@ -128,9 +152,9 @@ def test_velocity_error_of_a_uniform_shift(tmp_path):
     f = piv3d(VOL_A, shifted(1.5, 0), GRID, windows=(32, 16), overlap=0.5, dt_s=0.1)
     res = velocity_error(f, Uniform((1.5 * VOX / 0.1, 0.0, 0.0)))
     np.testing.assert_allclose(res["reference"][..., 0], 1.5 * VOX / 0.1, rtol=1e-12)
-    assert res["n"] == f.n_vectors and res["rms_vox"][0] < 0.06  # edge windows included: particles leave the volume
-    assert abs(res["bias_vox"][0]) < 0.05
-    assert abs(np.mean(interior(res["error"][..., 0])) * 0.1 / VOX) < 0.03  # interior, one deformation pass: -0.019
+    assert res["n"] == f.n_vectors and res["rms_vox"][0] < UNIFORM_RMS_TOL_VOX  # edge windows included
+    assert abs(res["bias_vox"][0]) < UNIFORM_BIAS_TOL_VOX
+    assert abs(np.mean(interior(res["error"][..., 0])) * 0.1 / VOX) < SHIFT_BIAS_TOL_VOX  # interior, one deformation pass: -0.019
     plot_velocity_error(f, res, tmp_path / "err.png")
     assert (tmp_path / "err.png").stat().st_size > 10_000
     with pytest.raises(ConfigError, match="dt_s"):
@@ -183,7 +207,7 @@ def test_uod_against_hand_computation_and_replacement():
         for k in bad:
             clean[k] -= (2.5, -1.0, 0.0)
         err = np.abs(h.displacement_vox() - clean)[h.replaced]
-        assert h.replaced.sum() == len(bad) and err.max() < 0.35
+        assert h.replaced.sum() == len(bad) and err.max() < UOD_REPLACEMENT_TOL_VOX
         np.testing.assert_allclose(h.displacement_vox()[~h.replaced], d[~h.replaced], rtol=1e-12)
     with pytest.raises(ConfigError, match="combine"):
         uod(_field(d), combine="sum")
@@ -194,7 +218,7 @@ def test_uod_against_hand_computation_and_replacement():
 def test_anisotropic_windows_normalised_peak_and_save_load(tmp_path):
     f = piv3d(VOL_A, VOL_A, GRID, windows=[(32, 16, 16)], overlap=(0.5, 0.75, 0.0), normalised=True)
     assert f.shape == (4, 13, 3)  # z: 64/16 no overlap, y: step 4, x: step 16
-    np.testing.assert_allclose(f.peak, 1.0, rtol=1e-5)  # identical windows: coefficient 1
+    np.testing.assert_allclose(f.peak, 1.0, rtol=NORMALISED_PEAK_RTOL)
     assert np.all(f.snr > 1)
     p = f.save(tmp_path / "f.npz")
     g = VectorField.load(p)

@@ -25,6 +25,27 @@ from mitpiv.reconstruct import VoxelGrid
 GRID = VoxelGrid.from_bounds((0, 0, 0), (40, 40, 20), 1.0)
 LO, HI = (0, 0, 0), (40, 40, 20)
 
+# Tolerances and their provenance. The definitions recomputed here in float64 agree to
+# rounding (1e-12, inline).
+# scipy.stats.pearsonr / spearmanr (peer implementations): float64 with another centring and
+# summation order over 32000 voxels.
+SCIPY_REL_TOL = 1e-9
+# The blank-reconstruction floor of eq. 4.2 against its large-N limit sqrt(3 / (4 - z^3))
+# (z the fraction of tied zeros): O(1/N) off at N = 32000.
+RANK_FLOOR_LIMIT_ABS_TOL = 1e-3
+# Plane SNR of uniform noise against 1 / (0.5 + 1/sqrt(12)): 20 planes of 1600 voxels spread
+# by 2.1e-3 relative (standard deviation over 200 seeds, measured; mean bias -3e-4), so 0.01
+# is ~5 standard deviations.
+UNIFORM_NOISE_SNR_REL_TOL = 0.01
+# Voxel-integrated blobs on a support of at least +-4 sigma: the total keeps at least
+# 1 - 3 x 6.3e-5 (three axes); the centroid is exact up to the support's asymmetry; the discrete
+# variance is sigma^2 + voxel^2 / 12 (Sheppard's correction) less the cut tails. Measured on
+# this test's cases: totals within 3e-5, centroids within 1.1e-5 mm, variances within 3e-4.
+BLOB_TOTAL_REL_TOL = 2e-4
+BLOB_CENTROID_ABS_TOL_MM = 1e-4
+BLOB_VARIANCE_REL_TOL = 1e-3
+HALF_OUTSIDE_ABS_TOL = 0.01  # a particle centred on the grid's face keeps half its intensity
+
 
 def blobs(n, seed):
     return truth_volume(np.random.default_rng(seed).uniform(LO, HI, (n, 3)), GRID)
@@ -41,9 +62,9 @@ def test_metrics_against_float64_formulas_and_scipy():
     rng = np.random.default_rng(1)
     a, b = blobs(80, 2), blobs(80, 2) + 0.05 * rng.random(GRID.shape)
     assert quality_q(a, b) == pytest.approx(np.sum(a * b) / np.sqrt(np.sum(a * a) * np.sum(b * b)), rel=1e-12)
-    assert quality_q_zero_mean(a, b) == pytest.approx(pearsonr(a.ravel(), b.ravel())[0], rel=1e-9)
+    assert quality_q_zero_mean(a, b) == pytest.approx(pearsonr(a.ravel(), b.ravel())[0], rel=SCIPY_REL_TOL)
     # many tied zeros in `a`: average ranks, as scipy's spearmanr
-    assert rank_correlation(a, b, centred=True) == pytest.approx(spearmanr(a.ravel(), b.ravel())[0], rel=1e-9)
+    assert rank_correlation(a, b, centred=True) == pytest.approx(spearmanr(a.ravel(), b.ravel())[0], rel=SCIPY_REL_TOL)
     assert rank_correlation(a, b) == pytest.approx(_eq_4_2(a, b), rel=1e-12)
 
 
@@ -66,7 +87,7 @@ def test_rank_correlation_eq_4_2_differs_from_spearman_on_sparse_particles():
     rec = cut(truth_volume(p + rng.normal(0, 0.8, p.shape), GRID) + 0.5 * truth_volume(rng.uniform(LO, HI, (40, 3)), GRID))
     q, sp = rank_correlation(rec, t), rank_correlation(rec, t, centred=True)
     assert q == pytest.approx(_eq_4_2(rec, t), rel=1e-12)
-    assert sp == pytest.approx(spearmanr(rec.ravel(), t.ravel())[0], rel=1e-9)
+    assert sp == pytest.approx(spearmanr(rec.ravel(), t.ravel())[0], rel=SCIPY_REL_TOL)
     assert q > 0.95 and sp < 0.6, (q, sp)  # measured 0.966 and 0.491
     # the floor: a blank reconstruction scores sum G_S / sqrt(N sum G_S^2); for a fraction z
     # of tied zeros it tends to sqrt(3 / (4 - z^3)) (N = 32000 here: O(1/N) off)
@@ -74,7 +95,7 @@ def test_rank_correlation_eq_4_2_differs_from_spearman_on_sparse_particles():
     g_s = rankdata(t.ravel())
     floor = np.sum(g_s) / np.sqrt(t.size * np.sum(g_s**2))
     assert rank_correlation(np.zeros(GRID.shape), t) == pytest.approx(floor, rel=1e-12)
-    assert floor == pytest.approx(np.sqrt(3 / (4 - z**3)), abs=1e-3)
+    assert floor == pytest.approx(np.sqrt(3 / (4 - z**3)), abs=RANK_FLOOR_LIMIT_ABS_TOL)
 
 
 def test_q_star_falls_with_ghosts_while_q_stays_high_at_dense_seeding():
@@ -106,7 +127,7 @@ def test_plane_snr_noise_versus_particles():
     rng = np.random.default_rng(7)
     noise = rng.random(GRID.shape)
     # uniform noise: max / (mean + std) -> 1 / (0.5 + 1/sqrt(12)) = 1.268 per plane
-    assert plane_snr(noise) == pytest.approx(1 / (0.5 + 1 / np.sqrt(12)), rel=0.01)
+    assert plane_snr(noise) == pytest.approx(1 / (0.5 + 1 / np.sqrt(12)), rel=UNIFORM_NOISE_SNR_REL_TOL)
     parts = blobs(100, 8) + 0.01 * noise
     s = plane_snr(parts)
     assert s > 5 * plane_snr(noise)
@@ -153,17 +174,17 @@ def test_truth_volume_conserves_intensity_and_centroid():
     p = np.array([[0.137, -0.211, 0.73]])
     for sig in (0.7, (0.7, 1.0, 1.5)):
         v = truth_volume(p, g, sigma_voxels=sig, intensities=[2.5])
-        assert v.sum() == pytest.approx(2.5, rel=2e-4)  # +-4 sigma support keeps 1 - 3 x 6.3e-5
+        assert v.sum() == pytest.approx(2.5, rel=BLOB_TOTAL_REL_TOL)
         s = np.broadcast_to(sig, (3,))
         for axis, coords, d, si in ((2, g.x_mm, 0.2, s[0]), (1, g.y_mm, 0.3, s[1]), (0, g.z_mm, 0.5, s[2])):
             prof = v.sum(axis=tuple(a for a in range(3) if a != axis))
             mean = np.sum(prof * coords) / prof.sum()
             var = np.sum(prof * (coords - mean) ** 2) / prof.sum()
-            assert mean == pytest.approx(p[0, 2 - axis], abs=1e-4)
-            assert var == pytest.approx((si * d) ** 2 + d**2 / 12, rel=1e-3)
+            assert mean == pytest.approx(p[0, 2 - axis], abs=BLOB_CENTROID_ABS_TOL_MM)
+            assert var == pytest.approx((si * d) ** 2 + d**2 / 12, rel=BLOB_VARIANCE_REL_TOL)
     # a particle half outside the grid keeps only its inside half
     edge = truth_volume(np.array([[-3.0, 0.0, 0.0]]), g)
-    assert edge.sum() == pytest.approx(0.5, abs=0.01)
+    assert edge.sum() == pytest.approx(0.5, abs=HALF_OUTSIDE_ABS_TOL)
 
 
 def test_empty_volumes_give_zero_not_nan():

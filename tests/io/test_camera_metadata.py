@@ -23,6 +23,7 @@ PINHOLE_CENTROID_TOL_PX = 0.5 + 0.1  # box filter: the pixel centre of the pixel
 # The plenoptic centroid: Monte Carlo (1e5 rays over a ~5 px radius aperture image: 0.02 px)
 # plus the binning of the aperture image into pixels (< 0.1 px for a disk ~10 px wide)
 PLENOPTIC_CENTROID_TOL_PX = 0.1
+MITSUBA_POSE_TOL_PX = 1e-3  # the render's true pose is float32 in Mitsuba, the nominal one float64
 
 
 def _centroid(img, centre, half):
@@ -67,7 +68,7 @@ def test_pinhole_from_rendered_metadata(tmp_path):
         np.testing.assert_allclose(_centroid(back, p_uv, 2.5), p_uv, atol=PINHOLE_CENTROID_TOL_PX)
     # the true pose of the render (float32 in Mitsuba) and the nominal one agree to 1e-3 px;
     # the distortion was read back (it moves the corner particles by pixels)
-    np.testing.assert_allclose(uv, cam0.project(pts), atol=1e-3)
+    np.testing.assert_allclose(uv, cam0.project(pts), atol=MITSUBA_POSE_TOL_PX)
     assert cam.distortion.k1 == -150.0
     assert np.abs(uv - PinholeCamera((48, 40), 12.0, 10.0, rotation=cam.rotation, position_mm=cam.position_mm)
                   .project(pts)).max() > 2 * PINHOLE_CENTROID_TOL_PX
@@ -99,7 +100,7 @@ def test_plenoptic_from_rendered_metadata(tmp_path):
     np.testing.assert_allclose(cam.image_centres_px(), sens.camera.image_centres_px(), rtol=0, atol=1e-9)
     uv = cam.project(pts)
     expect = cam.image_centres_px()[[r for r, _ in picks], [c for _, c in picks]]
-    np.testing.assert_allclose(uv, expect, atol=1e-3)  # float32 pose of the render
+    np.testing.assert_allclose(uv, expect, atol=MITSUBA_POSE_TOL_PX)
     for p_uv, half in zip(uv, (8.0, 25.0), strict=True):  # in focus: one aperture image; defocused: a patch
         np.testing.assert_allclose(_centroid(back, p_uv, half), p_uv, atol=PLENOPTIC_CENTROID_TOL_PX)
 

@@ -19,6 +19,9 @@ RES = (128, 96)
 ROT, POS = place_camera(azimuth_deg=25, elevation_deg=40, distance_mm=400)
 CAM = PinholeCamera(RES, 50.0, 10.0, rotation=ROT, position_mm=POS, distortion=Distortion(k1=-3.0, p1=1e-3))
 PTS = np.random.default_rng(0).uniform([-20, -20, -20], [20, 20, 20], (2000, 3))
+# A Soloff polynomial fitted to the distorted camera over a 16 x 12 x 8 mm volume: its RMS
+# reprojection error (the polynomial's model error for k1 = -3).
+SOLOFF_FIT_RMS_TOL_PX = 0.05
 
 
 def test_pinhole_mapping_is_its_camera():
@@ -44,7 +47,7 @@ def test_polynomial_mapping_contract():
     vol = np.random.default_rng(1).uniform([-8, -6, -4], [8, 6, 4], (3000, 3))
     poly = PolynomialMapping.fit(CAM.project(vol), vol, resolution=RES)
     assert isinstance(poly, Camera)
-    assert poly.rms_error(CAM.project(vol), vol) < 0.05
+    assert poly.rms_error(CAM.project(vol), vol) < SOLOFF_FIT_RMS_TOL_PX
     uv = poly.project(PTS)
     on = (uv[:, 0] >= 0) & (uv[:, 0] < RES[0]) & (uv[:, 1] >= 0) & (uv[:, 1] < RES[1])
     np.testing.assert_array_equal(poly.visible(PTS), on)

@@ -21,6 +21,14 @@ from tests.lightfield.helpers import particle_scene, render, white_scene
 RES = 240
 GRID = VoxelGrid.for_camera((-2, -2, -3.5), (2, 2, 3.5), pixel_size_mm=0.022, ratio=(2, 2, 10))
 
+# Tolerances and their provenance. Quality comparisons (multiplicative beats additive, two
+# cameras beat one) are orderings and stay inline.
+# fuse() on float32 volumes against its formula written afresh in float64.
+FUSE_RTOL, FUSE_ATOL = 1e-5, 1e-7
+# DRT weights against the light rendered by particle tracing (docstring: 256 rays and 8 samples
+# per slab find > 95 %, 64 rays and 2 samples 83 %).
+DRT_LIGHT_FRACTION = 0.95
+
 
 def pose(angle_deg):
     a = math.radians(angle_deg)
@@ -85,7 +93,7 @@ def test_fuse_normalises_brightness_and_keeps_zeros():
     assert fuse([1e-20 * a, 1e6 * b]) == pytest.approx(f, rel=1e-5)  # per-camera brightness drops out
     mu, sd = a.mean(), a.std()
     ref = np.sqrt(np.maximum(a - mu, 0) / sd * np.maximum(b - b.mean(), 0) / b.std())
-    assert f == pytest.approx(ref, rel=1e-5, abs=1e-7)
+    assert f == pytest.approx(ref, rel=FUSE_RTOL, abs=FUSE_ATOL)
     b[0] = 0.0
     assert not np.any(fuse([a, b])[0])
     assert not np.any(fuse([a, np.zeros_like(a)]))  # a camera with an empty volume
@@ -109,7 +117,7 @@ def test_drt_weights_follow_the_rendered_light(tmp_path):
     lit = np.flatnonzero(raw.ravel() > 0)
     w = drt_weights(cam, grid, pixels=lit, rays_per_pixel=256, substeps=8)
     crossing = np.flatnonzero(w[:, vox].toarray().ravel() > 0)
-    assert raw.ravel()[crossing].sum() > 0.95 * raw.sum()
+    assert raw.ravel()[crossing].sum() > DRT_LIGHT_FRACTION * raw.sum()
     assert w.shape == (RES * RES, grid.n_voxels) and w[np.setdiff1d(np.arange(RES * RES), lit)].nnz == 0
 
 

@@ -29,6 +29,8 @@ _SENSOR = """    <sensor type="distorted_pinhole" id="{sid}">
     </sensor>
 """
 THIN_LENS = '<float name="f_number" value="2"/><float name="focus_distance_mm" value="560"/>'
+# Monte Carlo checks: N_SIGMA standard errors (two-sided p 5.7e-7 for a normal statistic).
+N_SIGMA = 5
 
 
 def _xml(tmp_path, lens=THIN_LENS):
@@ -99,9 +101,9 @@ def test_particle_tracer_noise_falls_as_one_over_spp(tmp_path):
     # two sums in quadrature).
     rel = [np.sqrt(v.size) * v.std() / v.sum() for v in d2.values()]
     ratio = d2[1].sum() / d2[16].sum()
-    assert ratio == pytest.approx(16.0, rel=5 * np.hypot(*rel)), (ratio, rel)
+    assert ratio == pytest.approx(16.0, rel=N_SIGMA * np.hypot(*rel)), (ratio, rel)
     # unbiased: the image totals at spp 1 and 16 agree within 5 standard errors; the variance
     # of a total is at most the sum of the pixel variances (ray counts in different pixels are
     # negatively correlated), and a pixel's variance is E[d^2] / 2.
     tot = [render(sc, spp=s, seed=7).sum() for s in (1, 16)]
-    assert abs(tot[0] - tot[1]) < 5 * np.sqrt((d2[1].sum() + d2[16].sum()) / 2)
+    assert abs(tot[0] - tot[1]) < N_SIGMA * np.sqrt((d2[1].sum() + d2[16].sum()) / 2)
