@@ -209,7 +209,7 @@ def cmd_evaluate(args) -> int:
     from pathlib import Path
 
     from mitpiv import analysis
-    from mitpiv.io.atomic import atomic_path
+    from mitpiv.io.records import write_json
 
     out_path = Path(args.out) if args.out else None
     if out_path is not None and out_path.suffix != ".json":
@@ -230,8 +230,7 @@ def cmd_evaluate(args) -> int:
         v = s[f"{name}_vox"]
         print(f"  {name:4s} [voxels] x {v[0]:+.3f}  y {v[1]:+.3f}  z {v[2]:+.3f}")
     if out_path is not None:
-        with atomic_path(out_path, suffix=".json") as tmp:
-            tmp.write_text(json.dumps(out, indent=2))
+        write_json(out_path, out)
         res.plot(out_path.with_suffix(".png"))
         print(f"-> {out_path} (+ error PDFs {out_path.with_suffix('.png')})")
     return 0

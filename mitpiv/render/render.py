@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import hashlib
-import json
 import logging
 import time
 from pathlib import Path
@@ -15,6 +14,7 @@ import numpy as np
 from mitpiv.errors import ConfigError
 from mitpiv.io.atomic import atomic_path
 from mitpiv.io.exr import write_exr
+from mitpiv.io.records import write_json
 from mitpiv.progress import bar
 from mitpiv.render.scene import load_scene
 from mitpiv.streams import check_seed, render_seed
@@ -235,6 +235,5 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
                 _log.info("frame %d %s: %dx%d in %.2f s -> %s", f, sid, arr.shape[1], arr.shape[0], dt, path)
                 pbar.update()
     index = out / "render.json"
-    with atomic_path(index, suffix=".json") as tmp:
-        tmp.write_text(json.dumps({"scene": str(xml_path), "frames": frames, "files": [str(p) for p in written]}, indent=2))
+    write_json(index, {"scene": str(xml_path), "frames": frames, "files": [str(p) for p in written]})
     return written

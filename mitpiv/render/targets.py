@@ -79,7 +79,7 @@ def save_target_views(views, out_dir, *, sensors, target: CalibrationTarget) -> 
     """
     from pathlib import Path
 
-    from mitpiv.io.atomic import atomic_path
+    from mitpiv.io.arrays import write_npz
     from mitpiv.io.exr import write_exr
 
     sensors = list(sensors)
@@ -98,9 +98,8 @@ def save_target_views(views, out_dir, *, sensors, target: CalibrationTarget) -> 
                     "sensor_id": sid, "camera": sensor_model(s), "units": {"length": "mm"}}
             paths.append(write_exr(out / f"target_pose{k:02d}_{sid}.exr", img, meta))
     truth = out / "target_truth.npz"
-    with atomic_path(truth, suffix=".npz") as tmp:
-        with open(tmp, "wb") as f:
-            np.savez(f, poses=np.stack([v["pose"] for v in views]),
-                     markers_world=np.stack([v["markers_world"] for v in views]), sensor_ids=np.array(ids))
+    write_npz(truth, {"poses": np.stack([v["pose"] for v in views]),
+                      "markers_world": np.stack([v["markers_world"] for v in views]), "sensor_ids": np.array(ids)},
+              compressed=False, owner="save_target_views")
     paths.append(truth)
     return paths

@@ -43,14 +43,13 @@ def save_figure(fig, path, *, dpi: int = 90) -> None:
 
 def write(report: Report, out_dir, *, name: str = "report.md") -> dict:
     """Write the Markdown (``name``) and every figure of ``report`` into ``out_dir``."""
-    from mitpiv.io.atomic import atomic_path
+    from mitpiv.io.records import write_text
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     for figure, draw in report.figures.items():
         draw(out / figure)
-    with atomic_path(out / name) as tmp:
-        tmp.write_text(report.markdown)
+    write_text(out / name, report.markdown)
     return {"report": name, "figures": list(report.figures)}
 
 

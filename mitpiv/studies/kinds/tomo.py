@@ -275,16 +275,10 @@ def count_for_density(cfg, out: Path) -> int:
         raise ConfigError(f"experiment: [seeding] density_sensor = {wanted!r} is not in the scene; its sensors are "
                           f"{sorted(sensors)}.")
     camera = camera_from_metadata({"camera": sensor_model(sensors[wanted])})
-    plenoptic = getattr(camera, "mla_count", None) is not None
-    ppp, ppm = s.ppp, s.particles_per_microlens
-    if ppp is not None and ppm is not None:  # both: the density sensor's kind picks
-        ppp, ppm = (None, ppm) if plenoptic else (ppp, None)
-    if ppm is not None and not plenoptic:
-        raise ConfigError(f"experiment: [seeding] particles_per_microlens needs a plenoptic density_sensor; "
-                          f"{wanted!r} is a {type(camera).__name__}. Use ppp for pinhole cameras.")
     try:
-        # the visible fraction's Monte Carlo points: a stream of their own, not the seeding's
-        return count(camera, s.box_min_mm, s.box_max_mm, ppp=ppp, particles_per_microlens=ppm,
+        # both densities given: the camera's kind picks (per microlens for a plenoptic one);
+        # the visible fraction's Monte Carlo points take a stream of their own, not the seeding's
+        return count(camera, s.box_min_mm, s.box_max_mm, ppp=s.ppp, particles_per_microlens=s.particles_per_microlens,
                      seed=derived_seed(cfg.seed, "density", wanted))
     except ConfigError as e:
         raise ConfigError(f"experiment: [seeding] density sensor {wanted!r}: {e}") from None
