@@ -11,7 +11,6 @@ one message that names the table, the key, the bad value and the valid choices.
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
 import inspect
 import tomllib
@@ -37,7 +36,6 @@ class Table(BaseModel):
 
 
 Vec3 = Annotated[tuple[float, float, float], Field(description="three numbers (x, y, z)")]
-Vec3Int = tuple[int, int, int]
 
 
 def read_toml(path, what: str = "experiment") -> dict:
@@ -109,13 +107,6 @@ def discriminated(models: Mapping[str, type[BaseModel]], *, key: str = "kind") -
         tagged.append(create_model(m.__name__, __base__=m, __doc__=m.__doc__,
                                    **{key: (Literal[tag], Field(..., description=f"{key} of this table"))}))
     return Annotated[Union[tuple(tagged)], Field(discriminator=key)]  # noqa: UP007 - a runtime-built union
-
-
-def dataclass_model(name: str, cls, *, doc: str | None = None) -> type[BaseModel]:
-    """:func:`model_from_signature` for a dataclass, keeping its field types."""
-    if not dataclasses.is_dataclass(cls):
-        raise TypeError(f"{cls!r} is not a dataclass")
-    return model_from_signature(name, cls, doc=doc)
 
 
 # ------------------------------------------------------------------------ validation errors
