@@ -290,9 +290,16 @@ class SyntheticTurbulence:
         y = np.atleast_1d(np.asarray(y_plus, float))
         return self._stress_of(self._g(y), self._dg(y)).reshape(np.shape(y_plus) + (3, 3))
 
-    def fluctuation_plus(self, x_plus, *, chunk: int = 4096) -> np.ndarray:
+    def fluctuation_plus(self, x_plus, *, box_plus: tuple[float, float] | None = None,
+                         chunk: int = 4096) -> np.ndarray:
         """Fluctuation ``u'+`` (N, 3) at points ``x_plus`` (N, 3) [wall units], in the local
-        (streamwise, wall-normal, spanwise) frame; ``x_plus[:, 1]`` is the wall distance y+."""
+        (streamwise, wall-normal, spanwise) frame; ``x_plus[:, 1]`` is the wall distance y+.
+
+        ``box_plus = (l_x, l_z)`` returns instead the average over a segment of ``l_x`` along
+        the streamwise and ``l_z`` along the spanwise axis centred on each point (a box filter
+        in the wall-parallel plane), exactly: each mode's average is its value times
+        ``sinc(kappa_x l_x / 2) sinc(kappa_z l_z / 2)`` (``sinc(t) = sin t / t``); the wall-normal
+        average is left to a quadrature (:meth:`mitpiv.physics.flows.Channel.window_average`)."""
         x = np.asarray(x_plus, dtype=float)
         if x.ndim != 2 or x.shape[1] != 3:
             raise ConfigError(f"SyntheticTurbulence: points must have shape (N, 3), got {x.shape}.")
@@ -305,6 +312,12 @@ class SyntheticTurbulence:
         out = np.empty_like(x)
         t = self._T.reshape(self.modes, 27)
         u = self._U.reshape(self.modes, 27)
+        if box_plus is not None:
+            lx, lz = (float(v) for v in box_plus)
+            if not (lx >= 0 and lz >= 0):
+                raise ConfigError(f"SyntheticTurbulence: box_plus must be two lengths >= 0, got {box_plus!r}.")
+            f = np.sinc(self._kappa[:, 0] * lx / (2 * math.pi)) * np.sinc(self._kappa[:, 2] * lz / (2 * math.pi))
+            t, u = t * f[:, None], u * f[:, None]
         step = max(1, int(chunk) * 1000 // self.modes)
         for s in range(0, len(x), step):  # chunks bound the (N, M) memory; each is vectorised
             xs = x[s : s + step]
