@@ -444,7 +444,8 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
         :func:`normalised_cross_correlation`). ``peak`` is then gamma at its maximum and the
         displacement residual of a pass is limited to the margin (``normalised`` is ignored).
     search_margin : voxels per side of the NCC search region: one int, (m_x, m_y, m_z), or
-        None (a quarter of the pass's window, at least 2).
+        None (half the window in the first pass, which has no predictor, a quarter in the
+        later ones; at least 2).
     smooth : low-pass filter of the predictor between passes ("gaussian", sigma = window/6;
         "box", 3x3x3; None): iterative deformation with overlapping windows amplifies
         short wavelengths without it (Schrijer & Scarano 2008).
@@ -513,7 +514,8 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
             shift_b = s_int + shift_a
             base = s_int[:, ::-1].astype(np.float64)
         if correlation == "ncc":
-            m_xyz = search_margin or tuple(max(2, wi // 4) for wi in w)
+            # without a predictor the whole displacement must fit the margin: half a window
+            m_xyz = search_margin or tuple(max(2, wi // (2 if prev is None else 4)) for wi in w)
             m_zyx = np.array(m_xyz[::-1])
         else:
             m_zyx = np.zeros(3, dtype=np.int64)

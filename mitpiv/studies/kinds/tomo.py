@@ -166,7 +166,7 @@ class PivTable(Table):
     normalised: bool = Field(False, description="normalised cross-correlation")
     correlation: Literal["fft", "ncc"] = Field(
         "fft", description="fft: circular correlation of equal windows; ncc: Lewis normalised coefficient in a "
-        "search region grown by a quarter window")
+        "search region grown by half a window (first pass) or a quarter (later passes)")
     threshold: PosFloat = Field(2.0, description="universal outlier detection threshold")
     replace: Literal["median", "interpolation", "none"] = Field("median", description="outlier replacement")
 
