@@ -16,6 +16,7 @@ from mitpiv.errors import ConfigError
 from mitpiv.physics.targets import CalibrationTarget, markers_world
 from mitpiv.progress import Progress, track
 from mitpiv.render.render import render_sensor, sensor_model
+from mitpiv.render.scene import load_dict
 from mitpiv.render.variant import ensure_variant
 
 __all__ = ["target_scene", "render_target_views", "save_target_views"]
@@ -45,7 +46,7 @@ def target_scene(sensors, target: CalibrationTarget, pose, *, radiance: float = 
     }
     for i, s in enumerate(sensors):
         d[f"sensor{i}"] = s
-    return mi.load_dict(d)
+    return load_dict(d)  # mitpiv's: sensors that differ only in id stay distinct
 
 
 def render_target_views(sensors, target: CalibrationTarget, poses, *, spp: int = 64, seed: int = 0,
