@@ -66,7 +66,8 @@ def render_target_views(sensors, target: CalibrationTarget, poses, *, spp: int =
     poses = list(poses)
     for k, pose in enumerate(track(poses, desc="target views", progress=progress, unit="pose")):
         sc = target_scene(sensors, target, pose)
-        images = [render_sensor(sc, s, spp=int(spp), seed=seed + k) for s in sc.sensors()]
+        # each camera and pose its own stream (render_seed(seed, sensor id, pose index))
+        images = [render_sensor(sc, s, spp=int(spp), seed=seed, frame=k) for s in sc.sensors()]
         out.append({"pose": np.asarray(pose, dtype=float), "markers_world": markers_world(target, pose), "images": images})
         log.debug("target pose %d/%d rendered through %d camera(s)", k + 1, len(poses), len(images))
     return out

@@ -8,8 +8,9 @@ import pytest
 
 from mitpiv.errors import ConfigError
 from mitpiv.io import read_exr, write_particles_ply
+from mitpiv.render import scene as scenes
 from mitpiv.render.render import render_scene
-from mitpiv.render.scene import check_sensor_ids, load_dict, load_scene
+from mitpiv.render.scene import load_dict, load_scene
 
 from .helpers import particle_scene_xml
 
@@ -59,11 +60,97 @@ def test_two_sensors_differing_only_in_id_both_render(tmp_path):
     # scene dictionaries too
     s = {"type": "perspective", "fov": 30.0, "film": {"type": "hdrfilm", "width": 8, "height": 8}}
     d = load_dict({"type": "scene", "c0": {**s, "id": "c0"}, "c1": {**s, "id": "c1"}})
-    assert check_sensor_ids(d) == ["c0", "c1"]
+    assert scenes.check_sensor_ids(d) == ["c0", "c1"]
 
 
 def test_sensors_merged_by_mitsuba_are_refused(tmp_path):
     xml = _xml(tmp_path, [("camA", 30), ("camB", 30)])
     merged = mi.load_file(str(xml), frame="0")  # Mitsuba's default parser merges the two
     with pytest.raises(ConfigError, match="not distinct"):
-        check_sensor_ids(merged)
+        scenes.check_sensor_ids(merged)
+
+
+# ------------------------------------------------------------------ item 4: determinism and streams
+# Monte Carlo checks: N_SIGMA standard errors (two-sided p 5.7e-7 for a normal statistic).
+N_SIGMA = 5
+
+
+def _many_particles_scene(tmp_path, rfilter):
+    from .helpers import camera, scene
+
+    rng = np.random.default_rng(3)
+    pts = np.column_stack([rng.uniform(-2.0, 2.0, (2000, 2)), rng.uniform(-1.0, 1.0, 2000)])
+    # 2000 particles x 16 rays = 32k lanes: several threads splat into the same pixels
+    return scene(tmp_path, pts, cam=camera(res=(96, 96)), sensor_props={"f_number": 4.0, "focus_distance_mm": 490.0},
+                 integrator={"type": "particle_tracer", "rays_per_particle": 16}, rfilter={"type": rfilter})
+
+
+@pytest.mark.parametrize("rfilter", ["box", "gaussian"])
+def test_same_seed_particle_tracing_is_bit_identical(tmp_path, rfilter):
+    from .helpers import render
+
+    sc = _many_particles_scene(tmp_path, rfilter)
+    first = render(sc, spp=2, seed=5)
+    assert first.sum() > 0
+    for _ in range(3):
+        np.testing.assert_array_equal(render(sc, spp=2, seed=5), first)
+    assert not np.array_equal(render(sc, spp=2, seed=6), first)
+
+
+def _r(a, b):
+    """Pearson r over the pixels where either field is non-zero, and that pixel count."""
+    m = (a != 0) | (b != 0)
+    return float(np.corrcoef(a[m], b[m])[0, 1]), int(m.sum())
+
+
+def test_cameras_and_frames_draw_uncorrelated_noise(tmp_path):
+    # Two cameras with one view (they differ only in id), the same particles in frames 0 and 1:
+    # the expected images are equal, so shared random streams would give equal noise (r = 1).
+    # A noise field is the difference of two independent renders of one image; the sample r
+    # of independent fields has standard deviation about 1/sqrt(n), n the pixels with noise
+    # (neighbouring pixels share rays, so the bound uses n / 9, a 3x3 px neighbourhood).
+    xml = _xml(tmp_path, [("camA", 30), ("camB", 30)], n=300, res=48, same_frames=True)
+    images = {}
+    for seed in (1, 2):
+        for p in render_scene(xml, out_dir=tmp_path / f"s{seed}", frames=(0, 1), seed=seed, progress=False):
+            img, m = read_exr(p)
+            images[seed, m["sensor_id"], m["frame"]] = img.astype(np.float64)
+    noise = {k: images[1, *k] - images[2, *k] for k in [("camA", 0), ("camB", 0), ("camA", 1)]}
+    for a, b in [(("camA", 0), ("camB", 0)), (("camA", 0), ("camA", 1))]:
+        r, n = _r(noise[a], noise[b])
+        assert n > 200 and abs(r) < N_SIGMA / np.sqrt(n / 9), (a, b, r, n)
+    # one seed passed to mi.render for both cameras: the particle tracer still draws each
+    # camera's own samples (its stream hashes the sensor id)
+    sc = load_scene(xml, frame=0)
+    a, b = (np.array(mi.render(sc, sensor=i, seed=7), dtype=np.float64)[..., 0] for i in (0, 1))
+    a2, b2 = (np.array(mi.render(sc, sensor=i, seed=8), dtype=np.float64)[..., 0] for i in (0, 1))
+    r, n = _r(a - a2, b - b2)
+    assert not np.array_equal(a, b) and abs(r) < N_SIGMA / np.sqrt(n / 9), (r, n)
+
+
+def _camera_traced(rfilter):
+    rng = np.random.default_rng(4)
+    tex = rng.uniform(0.1, 1.0, (64, 64, 1)).astype(np.float32)
+    return load_dict({
+        "type": "scene", "integrator": {"type": "direct"},
+        "sensor": {"type": "perspective", "fov": 40.0, "to_world": mi.ScalarTransform4f().look_at(
+                   origin=[0, 0, 2.0], target=[0, 0, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 128, "height": 128, "pixel_format": "luminance",
+                            "rfilter": {"type": rfilter}}},
+        "card": {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}},
+                 "emitter": {"type": "area", "radiance": {"type": "bitmap", "bitmap": mi.Bitmap(tex), "raw": True}}},
+    })
+
+
+def test_same_seed_camera_tracing_is_bit_identical_with_a_box_filter_and_bounded_otherwise():
+    from mitpiv.render.render import filter_rounding_bound
+
+    for rfilter, radius in (("box", 0.5), ("gaussian", 2.0)):
+        sc = _camera_traced(rfilter)
+        imgs = [np.array(mi.render(sc, spp=4, seed=3), dtype=np.float64)[..., 0] for _ in range(3)]
+        assert imgs[0].min() > 0
+        for img in imgs[1:]:
+            if rfilter == "box":
+                np.testing.assert_array_equal(img, imgs[0])
+            else:  # the documented limit: float32 rounding of each pixel's sum and weight
+                assert np.all(np.abs(img - imgs[0]) <= filter_rounding_bound(4, radius) * imgs[0])
