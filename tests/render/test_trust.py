@@ -154,3 +154,71 @@ def test_same_seed_camera_tracing_is_bit_identical_with_a_box_filter_and_bounded
                 np.testing.assert_array_equal(img, imgs[0])
             else:  # the documented limit: float32 rounding of each pixel's sum and weight
                 assert np.all(np.abs(img - imgs[0]) <= filter_rounding_bound(4, radius) * imgs[0])
+
+
+# ------------------------------------------------------------------ item 5: distortion beyond the fold
+# 14 % barrel distortion (accepted: the radial map still rises 3 % past the image corner):
+# a point 2.4 corner radii out folds back to half the corner radius under the forward model.
+DISTORTION = {"distortion_percent": 14.0}
+N_CT_SEEDS = 6  # independent camera-tracing renders: their spread gives the standard error
+# |difference| / standard error, Student t with N_CT_SEEDS-1 dof, family-wise alpha 1e-3 over 4 particles
+Z_MAX = float(__import__("scipy.stats").stats.t.ppf(1 - 1e-3 / 8, N_CT_SEEDS - 1))
+
+
+def _world(cam, xy_norm, depth_mm=500.0):
+    """World points at ``depth_mm`` whose undistorted normalised coordinates are ``xy_norm``."""
+    xy = np.asarray(xy_norm, float)
+    pc = np.column_stack([xy * depth_mm, np.full(len(xy), depth_mm)])
+    return cam.position_mm + pc @ cam.rotation
+
+
+def test_particles_beyond_the_fold_are_seen_by_neither_strategy_nor_the_mapping(tmp_path):
+    from mitpiv.physics.distortion import undistort
+    from mitpiv.reconstruct.mapping import PinholeMapping
+
+    from .helpers import render, scene
+
+    probe = scene(tmp_path, np.zeros((1, 3)), sensor_props=DISTORTION, name="probe.ply").sensors()[0].camera
+    f, (cx, cy) = probe.focal_px, probe.principal_point_px
+    # inside: principal pre-images of pixels 2-4 px from the border; outside: beyond the fold
+    uv_in = np.array([[3.0, 24.0], [45.2, 20.0], [24.0, 2.5], [5.0, 5.5]])
+    x_in = np.column_stack(undistort((uv_in[:, 0] - cx) / f, (uv_in[:, 1] - cy) / f, probe.distortion, iterations=60))
+    r_out = 2.4 * probe.corner_radius
+    ang = np.radians([10.0, 100.0, 200.0, 300.0])
+    x_out = r_out * np.column_stack([np.cos(ang), np.sin(ang)])
+    assert r_out > 1 / np.sqrt(-3 * probe.distortion.k1)  # the radial map r (1 + k1 r^2) peaks there
+    pts_in, pts_out = _world(probe, x_in), _world(probe, x_out)
+    uv_out = probe.project(pts_out)
+    assert np.all((uv_out > 4) & (uv_out < 44))  # the forward model lands them on the image
+    np.testing.assert_allclose(probe.project(pts_in), uv_in, atol=1e-6)
+    mapping = PinholeMapping(probe)
+    assert mapping.visible(pts_in).all() and not mapping.visible(pts_out).any()
+
+    pts = np.vstack([pts_in, pts_out])
+    pt = render(scene(tmp_path, pts, sensor_props=DISTORTION), seed=1)
+    ct = [render(scene(tmp_path, pts, sensor_props=DISTORTION, integrator={"type": "direct"}), spp=512, seed=s)
+          for s in range(N_CT_SEEDS)]
+
+    def sums(img, uv, half=2):
+        yy, xx = np.mgrid[0:img.shape[0], 0:img.shape[1]] + 0.5
+        return np.array([img[(np.abs(xx - u) <= half) & (np.abs(yy - v) <= half)].sum() for u, v in uv])
+
+    assert np.all(sums(pt, uv_out) == 0)  # particle tracing: not drawn
+    assert all(np.all(sums(c, uv_out) == 0) for c in ct)
+    # near the edge the two strategies agree within camera tracing's standard error
+    pt_sums = sums(pt, uv_in)
+    ct_sums = np.array([sums(c, uv_in) for c in ct])
+    mean, se = ct_sums.mean(0), ct_sums.std(0, ddof=1) / np.sqrt(N_CT_SEEDS)
+    assert np.all(pt_sums > 0) and (np.abs(mean - pt_sums) / se).max() < Z_MAX, (mean, pt_sums, se)
+    assert abs(np.mean([c.sum() for c in ct]) - pt.sum()) < Z_MAX * np.std([c.sum() for c in ct], ddof=1) / np.sqrt(N_CT_SEEDS)
+
+
+def test_fold_radius_is_where_the_radial_map_peaks():
+    from mitpiv.physics.distortion import Distortion, fold_radius
+
+    assert fold_radius(Distortion(k1=-3.0)) == pytest.approx(1 / 3.0, rel=1e-12)  # 1 - 9 r^2 = 0
+    assert fold_radius(Distortion(k1=2.0)) == float("inf") and fold_radius(Distortion()) == float("inf")
+    # with k2: the smallest positive root of 1 + 3 k1 s + 5 k2 s^2, by the quadratic formula
+    k1, k2 = -1.0, 0.05
+    s = (-3 * k1 - np.sqrt(9 * k1**2 - 20 * k2)) / (10 * k2)
+    assert fold_radius(Distortion(k1=k1, k2=k2)) == pytest.approx(np.sqrt(s), rel=1e-9)
