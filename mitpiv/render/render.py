@@ -28,13 +28,14 @@ from __future__ import annotations
 import hashlib
 import logging
 import time
+import warnings
 from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitpiv.errors import ConfigError
+from mitpiv.errors import ConfigError, MitpivWarning
 from mitpiv.io.atomic import atomic_path
 from mitpiv.io.exr import write_exr
 from mitpiv.io.records import write_json
@@ -46,7 +47,7 @@ from mitpiv.version import __version__
 _log = logging.getLogger(__name__)
 
 __all__ = ["render_scene", "render_sensor", "sensor_model", "write_preview", "PIXEL_UNITS", "DETERMINISM",
-           "filter_rounding_bound"]
+           "filter_rounding_bound", "black_image_hints"]
 
 PIXEL_UNITS = (
     "radiance [W sr^-1 mm^-2] averaged over the pixel footprint and the aperture "
@@ -164,6 +165,37 @@ def write_preview(path, image: np.ndarray, *, percentile: float = 99.9) -> Path:
     return Path(path)
 
 
+def black_image_hints(scene, sensor) -> list[str]:
+    """Likely reasons why ``sensor`` renders ``scene`` black (every pixel 0), for the warning
+    of :func:`render_scene`: no particles, a camera inside the particles' bounding box, no
+    particle on the sensor (a principal point far outside the image, say), a microlens
+    array off the sensor."""
+    from mitpiv.physics.camera import on_sensor
+
+    hints = []
+    centres = [np.array(e.particle_arrays()[0], dtype=np.float64).reshape(3, -1).T
+               for e in (sh.emitter() for sh in scene.shapes()) if e is not None and hasattr(e, "particle_arrays")]
+    pts = np.concatenate(centres) if centres else np.zeros((0, 3))
+    cam = getattr(sensor, "camera", None)
+    if not len(pts):
+        hints.append("the scene has no tracer particles")
+    else:
+        pos = np.array(sensor.world_transform().matrix, dtype=np.float64).reshape(4, 4)[:3, 3]
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        if np.all(pos >= lo) and np.all(pos <= hi):
+            hints.append(f"the camera at {np.round(pos, 3).tolist()} mm is inside the particles' bounding box "
+                         f"{np.round(lo, 3).tolist()}..{np.round(hi, 3).tolist()} mm: move it out")
+        if cam is not None and hasattr(cam, "visible") and not np.any(cam.visible(pts)):
+            hints.append(f"none of the {len(pts)} particles projects onto the sensor")
+    pp = getattr(cam, "principal_point_px", None)
+    if pp is not None and not on_sensor(np.asarray(pp, dtype=float), cam.resolution):
+        hints.append(f"the principal point {tuple(round(v, 1) for v in pp)} px is outside the "
+                     f"{cam.resolution[0]}x{cam.resolution[1]} image")
+    if cam is not None and hasattr(cam, "image_centres_px") and not np.any(on_sensor(cam.image_centres_px(), cam.resolution)):
+        hints.append(f"no microlens image lies on the sensor (mla_offset_um {list(cam.mla_offset_um)})")
+    return hints
+
+
 def _truth_info(xml_path: Path, params: dict) -> tuple[str | None, np.ndarray | None]:
     name = params.get("truth")
     cand = xml_path.parent / (name or "truth.npz")
@@ -274,6 +306,11 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
                     "truth_file": truth,
                     "render_seconds": dt,
                 }
+                if not np.any(arr > 0):  # a black image is never a result: say so, and why
+                    hints = black_image_hints(sc, sensor)
+                    meta["warnings"] = [f"black image (every pixel 0); {'; '.join(hints) or 'no reason found'}"]
+                    warnings.warn(f"render: camera {sid!r} frame {f} rendered black (every pixel 0): "
+                                  f"{'; '.join(hints) or 'no particle reaches its sensor'}.", MitpivWarning, stacklevel=2)
                 path = out / f"{sid}_frame{f:03d}.exr"
                 write_exr(path, arr, meta)
                 write_preview(path.with_suffix(".png"), arr)

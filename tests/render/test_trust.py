@@ -222,3 +222,37 @@ def test_fold_radius_is_where_the_radial_map_peaks():
     k1, k2 = -1.0, 0.05
     s = (-3 * k1 - np.sqrt(9 * k1**2 - 20 * k2)) / (10 * k2)
     assert fold_radius(Distortion(k1=k1, k2=k2)) == pytest.approx(np.sqrt(s), rel=1e-9)
+
+
+# ------------------------------------------------------------------ item 8: black images are reported
+_LOOKAT = """    <sensor type="distorted_pinhole" id="{sid}">
+        <transform name="to_world"><lookat origin="{origin}" target="{target}" up="0, 0, 1"/></transform>
+        <float name="focal_length_mm" value="85"/>
+        <float name="pixel_pitch_um" value="20"/>
+        {extra}
+        <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/>
+            <string name="pixel_format" value="luminance"/></film>
+    </sensor>
+"""
+
+
+@pytest.mark.parametrize("case", ["principal_point", "inside_box"])
+def test_a_black_render_warns_and_says_why(tmp_path, case):
+    from mitpiv.errors import MitpivWarning
+
+    rng = np.random.default_rng(5)
+    pts = np.column_stack([rng.uniform(-5, 5, (60, 2)), rng.uniform(-1.0, 1.0, 60)])
+    write_particles_ply(tmp_path / "particles_0.ply", pts, 1.5, proxy_radius_mm=0.01)
+    if case == "principal_point":  # looks at the particles, but the optical axis lands 500 px off the image
+        sensor = _LOOKAT.format(sid="cam0", origin="0, -400, 300", target="0, 0, 0",
+                                extra='<float name="principal_point_x_px" value="500"/>')
+        words = "principal point"
+    else:  # inside the seeding box, looking along it past every particle
+        sensor = _LOOKAT.format(sid="cam0", origin="0.01, 0.02, 0.05", target="0.01, 400, 300", extra="")
+        words = "inside the particles' bounding box"
+    (tmp_path / "scene.xml").write_text(particle_scene_xml(sensor))
+    with pytest.warns(MitpivWarning, match="rendered black") as rec:
+        (path,) = render_scene(tmp_path / "scene.xml", out_dir=tmp_path / "out", frames=(0,), progress=False)
+    assert words in str(rec[0].message)
+    img, meta = read_exr(path)
+    assert not img.any() and words in meta["warnings"][0]

@@ -1,0 +1,73 @@
+"""Silent black results (issue 30 item 8): sensor images without particle signal are refused
+(CLI, experiment) or reported, and metrics without a value are null with a reason, never NaN."""
+
+import math
+
+import numpy as np
+import pytest
+
+from mitpiv.errors import ConfigError, MitpivWarning
+from mitpiv.imaging import SensorModel, apply_sensor_set
+from mitpiv.io import write_exr
+
+
+def _particle_image(rng, shape=(48, 48), n=30, peak=2e-5):
+    """A rendered-looking image: Gaussian spots of radiance ~1e-5 (W sr^-1 mm^-2), as the
+    renderer gives for micron particles."""
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]] + 0.5
+    img = np.zeros(shape)
+    for u, v in rng.uniform(4, shape[0] - 4, (n, 2)):
+        img += peak * np.exp(-((xx - u) ** 2 + (yy - v) ** 2) / 2.0)
+    return img
+
+
+def test_cli_sensor_without_exposure_refuses_all_black_images(tmp_path, capsys):
+    from mitpiv.cli import main
+
+    rng = np.random.default_rng(1)
+    files = []
+    for cam in ("cam0", "cam1"):
+        files.append(tmp_path / f"{cam}_frame000.exr")
+        write_exr(files[-1], _particle_image(rng).astype(np.float32), {"sensor_id": cam, "frame": 0})
+    out = tmp_path / "counts"
+    # radiance taken as photons (no --exposure): the brightest pixel is 2e-5 counts, all round to 0
+    assert main(["sensor", *map(str, files), "--out", str(out), "--bit-depth", "8", "--noise-percent", "5"]) == 2
+    err = capsys.readouterr().err
+    assert "no particle signal" in err and "--exposure" in err
+    assert not out.exists() or not any(out.iterdir())  # nothing written
+    # with an exposure the same images are fine
+    assert main(["sensor", *map(str, files), "--out", str(out), "--bit-depth", "8", "--peak-photons", "200"]) == 0
+    assert len(list(out.iterdir())) == 2
+
+
+def test_sensor_set_reports_degenerate_images():
+    rng = np.random.default_rng(2)
+    bright, dark = _particle_image(rng), np.zeros((48, 48))
+    images = {("cam0", 0): bright, ("cam1", 0): dark}
+    m = SensorModel(peak_photons=200.0, bit_depth=8)
+    with pytest.warns(MitpivWarning, match="1 of 2 sensor image"):
+        res = apply_sensor_set(images, m, seed=0)
+    assert set(res.degenerate) == {("cam1", 0)} and "rendered image is black" in res.degenerate[("cam1", 0)]
+    # saturated everywhere
+    res = apply_sensor_set({("c", 0): np.ones((8, 8))}, SensorModel(exposure=1e4, bit_depth=8), seed=0,
+                           on_degenerate="ignore")
+    assert "saturates at 255" in res.degenerate[("c", 0)]
+    # every image black: "raise" refuses, naming the fix
+    with pytest.raises(ConfigError, match="exposure"):
+        apply_sensor_set({("cam0", 0): bright}, SensorModel(bit_depth=8, gaussian_noise_percent=5.0), seed=0,
+                         on_degenerate="raise")
+
+
+def test_metrics_without_a_value_are_null_with_a_reason():
+    from mitpiv.studies.kinds.tomo import headline, null_metrics
+
+    m = {"Q": 0.5, "piv": {"rms_vox": [math.nan, 0.1, math.inf], "n": 0, "bias": math.nan}, "ok": None}
+    with pytest.warns(MitpivWarning, match="2 metric"):
+        out = null_metrics(m, {"piv": "0 valid vectors"}, where="piv")
+    assert out["piv"]["rms_vox"] == [None, 0.1, None] and out["piv"]["bias"] is None and out["Q"] == 0.5
+    assert out["null_reasons"] == {"piv.rms_vox": "0 valid vectors", "piv.bias": "0 valid vectors"}
+    assert "nan" not in repr(out).lower()
+    text = headline({"name": "x", "evaluate": {"frame0": {"Q": None, "particles": {"detection_rate": None},
+                                                          "null_reasons": {"Q": "empty volume"}}},
+                     "piv": {"rms_vox": [None, None, None]}})
+    assert "Q n/a" in text and "empty volume" in text and "nan" not in text.lower()
