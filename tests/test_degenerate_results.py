@@ -71,3 +71,39 @@ def test_metrics_without_a_value_are_null_with_a_reason():
                                                           "null_reasons": {"Q": "empty volume"}}},
                      "piv": {"rms_vox": [None, None, None]}})
     assert "Q n/a" in text and "empty volume" in text and "nan" not in text.lower()
+
+
+def test_experiment_with_8_bit_noise_and_no_exposure_stops_at_the_sensor_stage(tmp_path):
+    """The issue's case: 8-bit output and 5 % noise without an exposure used to round every
+    image to 0 and end with Q 0.000 and a NaN PIV error, exit 0."""
+    from pathlib import Path
+
+    from mitpiv.studies import load_experiment, run_config
+
+    scene = Path(__file__).resolve().parents[1] / "scenes" / "tomo4" / "scene.xml"
+    exp = tmp_path / "exp.toml"
+    exp.write_text(f"""name = "black"
+seed = 1
+[scene]
+xml = "{scene}"
+params = {{ resolution = 48, thickness_mm = 4 }}
+[seeding]
+box_min_mm = [-3.0, -3.0, -1.0]
+box_max_mm = [3.0, 3.0, 1.0]
+count = 60
+[flow]
+kind = "uniform"
+velocity_mm_s = [100.0, 0.0, 0.0]
+dt_s = 0.002
+[render]
+sensors = ["cam0", "cam1"]
+[reconstruction]
+bounds_mm = [-3.0, 3.0, -3.0, 3.0, -1.0, 1.0]
+voxel_mm = 0.2
+[sensor]
+bit_depth = 8
+gaussian_noise_percent = 5.0
+""")
+    with pytest.raises(ConfigError, match="no particle signal.*exposure"):
+        run_config(load_experiment(exp), tmp_path / "run", until="sensor")
+    assert not list((tmp_path / "run" / "sensor").glob("*.exr"))
