@@ -256,3 +256,24 @@ def test_a_black_render_warns_and_says_why(tmp_path, case):
     assert words in str(rec[0].message)
     img, meta = read_exr(path)
     assert not img.any() and words in meta["warnings"][0]
+
+
+def test_a_microlens_array_off_the_sensor_warns(tmp_path):
+    from mitpiv.errors import MitpivWarning
+
+    write_particles_ply(tmp_path / "particles_0.ply", np.random.default_rng(5).uniform(-0.5, 0.5, (30, 3)), 1.5,
+                        proxy_radius_mm=0.005)
+    sensor = """<sensor type="plenoptic" id="plen0">
+        <float name="azimuth_deg" value="0"/><float name="elevation_deg" value="75"/>
+        <float name="distance_mm" value="100"/><float name="focal_length_mm" value="10"/>
+        <float name="f_number" value="2"/><float name="focus_distance_mm" value="100"/>
+        <float name="pixel_pitch_um" value="1.4"/><float name="mla_pitch_um" value="14"/>
+        <float name="mla_focal_length_um" value="28"/><string name="mla_layout" value="rect"/>
+        <integer name="mla_count_x" value="6"/><integer name="mla_count_y" value="6"/>
+        <float name="mla_offset_x_um" value="500"/>
+        <film type="hdrfilm"><integer name="width" value="60"/><integer name="height" value="60"/>
+            <string name="pixel_format" value="luminance"/><rfilter type="box"/></film></sensor>"""
+    (tmp_path / "scene.xml").write_text(particle_scene_xml(
+        sensor, integrator='<integrator type="particle_tracer"><integer name="rays_per_particle" value="200"/></integrator>'))
+    with pytest.warns(MitpivWarning, match="no microlens image lies on the sensor"):
+        render_scene(tmp_path / "scene.xml", out_dir=tmp_path / "out", frames=(0,), progress=False)
