@@ -244,6 +244,12 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
     -------
     list of Path
         The EXR files written.
+
+    Warns
+    -----
+    MitpivWarning
+        An image rendered black (every pixel 0), with the likely reasons
+        (:func:`black_image_hints`); they are also kept in its metadata's ``"warnings"``.
     """
     xml_path = Path(scene)
     out = Path(out_dir)
