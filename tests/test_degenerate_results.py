@@ -107,3 +107,46 @@ gaussian_noise_percent = 5.0
     with pytest.raises(ConfigError, match="no particle signal.*exposure"):
         run_config(load_experiment(exp), tmp_path / "run", until="sensor")
     assert not list((tmp_path / "run" / "sensor").glob("*.exr"))
+
+
+def test_an_empty_volume_has_null_quality_not_zero(tmp_path):
+    """The evaluate stage of a run whose reconstruction is empty: Q is null with the reason
+    (it read 0.000 before, as if measured), and nothing is NaN."""
+    from pathlib import Path
+
+    from mitpiv.io import write_truth, write_volume
+    from mitpiv.studies import load_experiment
+    from mitpiv.studies.kinds.tomo import grid_of, stage_evaluate
+    from mitpiv.studies.runner import StageContext
+
+    scene = Path(__file__).resolve().parents[1] / "scenes" / "tomo4" / "scene.xml"
+    exp = tmp_path / "exp.toml"
+    exp.write_text(f"""name = "empty"
+[scene]
+xml = "{scene}"
+[seeding]
+box_min_mm = [-1.0, -1.0, -1.0]
+box_max_mm = [1.0, 1.0, 1.0]
+count = 5
+[flow]
+kind = "uniform"
+velocity_mm_s = [100.0, 0.0, 0.0]
+dt_s = 0.002
+[reconstruction]
+bounds_mm = [-1.0, 1.0, -1.0, 1.0, -1.0, 1.0]
+voxel_mm = 0.2
+""")
+    cfg = load_experiment(exp)
+    grid = grid_of(cfg)
+    run = tmp_path / "run"
+    pts = np.random.default_rng(3).uniform(-0.8, 0.8, (5, 3))
+    write_truth(run / "particles" / "truth.npz", positions_mm=[pts, pts + [0.2, 0, 0]], times_s=[0.0, 0.002],
+                diameters_um=np.ones(5))
+    for frame in (0, 1):
+        write_volume(run / "reconstruct" / f"volume_{frame}.npz", np.zeros(grid.shape), {"grid": grid.to_dict()})
+    (run / "evaluate").mkdir()
+    ctx = StageContext(cfg=cfg, run_dir=run, out=run / "evaluate", results={}, timings={})
+    with pytest.warns(MitpivWarning, match="metric"):
+        m = stage_evaluate(ctx)
+    assert m["frame0"]["Q"] is None and "volume of frame 0 is empty" in m["frame0"]["null_reasons"]["Q"]
+    assert "nan" not in repr(m).lower()
