@@ -262,31 +262,4 @@ def test_default_experiment_matches_the_scene_particles(tmp_path):
     assert all(np.allclose(truth["flow"][k], v) for k, v in flow.items() if k != "kind")
 
 
-def test_a_killed_worker_loses_nothing(tmp_path):
-    """A worker process dies (os._exit) as it starts the first point: the nanny restarts it,
-    Dask reruns the point, and the sweep finishes with every point's result; the study runs
-    on an existing cluster given by its scheduler address."""
-    import os
-
-    from dask.distributed import Client, LocalCluster, WorkerPlugin
-
-    from mitpiv.studies import run_sweep
-
-    class KillOnce(WorkerPlugin):
-        def __init__(self, marker):
-            self.marker = marker
-
-        def transition(self, key, start, finish, **kwargs):
-            if finish == "executing" and not os.path.exists(self.marker):
-                open(self.marker, "w").close()
-                os._exit(1)
-
-    write(tmp_path, BASE.replace("iterations = 3", "iterations = 1"))
-    study = write(tmp_path, 'experiment = "exp.toml"\n[grid]\n"reconstruction.iterations" = [1, 2]\n', "study.toml")
-    marker = tmp_path / "killed"
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
-        client.register_plugin(KillOnce(str(marker)))
-        df = run_sweep(study, tmp_path / "sweep", scheduler=cluster.scheduler_address)
-    assert marker.is_file()  # the worker was killed
-    assert list(df["status"]) == ["ok", "ok"] and df["frame0.Q"].notna().all()
+# the killed-worker sweep test is in test_faults.py (a worker killed by its PID mid-point)
