@@ -186,7 +186,7 @@ def test_bad_experiment_files(tmp_path, text, match):
     assert not (tmp_path / "run" / "particles").exists()
 
 
-def test_sweep_on_a_local_cluster_records_a_failing_point(tmp_path):
+def test_sweep_on_a_local_cluster_records_a_failing_point(tmp_path, capsys):
     import pandas as pd
 
     from mitpiv.studies import run_sweep
@@ -214,12 +214,26 @@ y = "frame0.Q"
     assert (tmp_path / "sweep" / "sweep.png").stat().st_size > 5000
     table = pd.read_parquet(tmp_path / "sweep" / "results.parquet")
     assert len(table) == 3 and set(pd.read_csv(tmp_path / "sweep" / "results.csv")["status"]) == {"ok", "error"}
-    # a rerun (here through the CLI) finds the finished points; only the failed one runs again
+    # a rerun (here through the CLI) finds the finished points; only the failed one runs again,
+    # fails again, and the sweep exits non-zero listing it
     from mitpiv.cli import main
 
-    assert main(["sweep", str(study), "--out", str(tmp_path / "sweep"), "--workers", "1"]) == 0
+    assert main(["sweep", str(study), "--out", str(tmp_path / "sweep"), "--workers", "1"]) == 1
+    out = capsys.readouterr()
+    assert f"failed {df['point'].iloc[2]}" in out.out and "1 of 3 points failed" in out.err
     df2 = pd.read_csv(tmp_path / "sweep" / "results.csv")
     assert df2["frame0.Q"].iloc[:2].tolist() == df["frame0.Q"].iloc[:2].tolist()
+    # the base experiment changed (a PIV setting): the points are not taken from the table but
+    # rerun, each in its folder, where only the stages the change reaches run again
+    points = [tmp_path / "sweep" / "points" / p for p in df["point"].iloc[:2]]
+    render_records = [(p / "render" / "stage.json").read_bytes() for p in points]
+    piv_records = [(p / "piv" / "stage.json").read_bytes() for p in points]
+    write(tmp_path, BASE.replace("iterations = 3", "iterations = 1").replace("overlap = 0.5", "overlap = 0.25"))
+    df3 = run_sweep(study, tmp_path / "sweep", workers=1)
+    assert [(p / "render" / "stage.json").read_bytes() for p in points] == render_records
+    assert all((p / "piv" / "stage.json").read_bytes() != r for p, r in zip(points, piv_records, strict=True))
+    assert df3["frame0.Q"].iloc[:2].tolist() == df["frame0.Q"].iloc[:2].tolist()
+    assert df3["piv.rms_vox_x"].iloc[:2].tolist() != df["piv.rms_vox_x"].iloc[:2].tolist()
 
 
 def test_bad_study_files(tmp_path):
@@ -231,9 +245,13 @@ def test_bad_study_files(tmp_path):
                         ("[grid]\n\"seed\" = [1]\n", "base experiment"),
                         ("experiment = \"exp.toml\"\nfoo = 1\n[grid]\n\"seed\" = [1]\n", "unknown key"),
                         # a bad point is found before any point runs
-                        ("experiment = \"exp.toml\"\n[grid]\n\"piv.overlap\" = [0.5, 1.5]\n", "overlap")):
+                        ("experiment = \"exp.toml\"\n[grid]\n\"piv.overlap\" = [0.5, 1.5]\n", "overlap"),
+                        # every bad point, in one message
+                        ("experiment = \"exp.toml\"\n[grid]\n\"piv.overlap\" = [0.5, 1.5, 2.5]\n",
+                         r"(?s)2 of 3 points are invalid \(nothing was run\).*1\.5.*2\.5")):
         with pytest.raises(ConfigError, match=match):
             run_sweep(write(tmp_path, text, "s.toml"), tmp_path / "sw")
+        assert not (tmp_path / "sw" / "points").exists()
 
 
 def test_default_experiment_matches_the_scene_particles(tmp_path):

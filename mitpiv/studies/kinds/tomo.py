@@ -262,7 +262,6 @@ def scene_files(cfg) -> list[Path]:
     ``$name`` substituted from its defaults and ``[scene] params``, relative names resolved
     against its folder), except the particle files, which the run makes. Their content is
     part of the render stage's key. Parsed with the standard library (no Mitsuba import)."""
-    import re
     import xml.etree.ElementTree as ET
 
     xml = Path(cfg.scene.xml)
@@ -284,7 +283,10 @@ def scene_files(cfg) -> list[Path]:
     for n in names:
         for frame in FRAMES:
             v = {**values, "frame": str(frame)}
-            p = Path(re.sub(r"\$(\w+)", lambda m, v=v: str(v.get(m.group(1), m.group(0))), n))
+            text = n
+            for k in sorted(v, key=len, reverse=True):  # as Mitsuba substitutes: each $name, longest first
+                text = text.replace(f"${k}", str(v[k]))
+            p = Path(text)
             p = p if p.is_absolute() else xml.parent / p
             if p not in out:
                 out.append(p)
