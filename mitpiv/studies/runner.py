@@ -60,6 +60,9 @@ log = logging.getLogger(__name__)
 #: Part of every stage key: raise it when a change makes earlier stage folders invalid.
 SCHEMA_VERSION = 3
 
+#: The run's summary files: removed as soon as a stage (re)runs, written when all are done.
+SUMMARY_FILES = ("metrics.json", "timings.json")
+
 #: Packages whose version is part of the key of a stage that renders.
 RENDER_PACKAGES = ("mitsuba", "drjit")
 
@@ -344,6 +347,8 @@ def run_stages(cfg: BaseModel, run_dir, stages: list[Stage], *, progress: Progre
                     b.update()
                     continue
                 log.info("[%s] %s ...", name, st.name)
+                for f in SUMMARY_FILES:  # an earlier run's summary no longer describes this folder
+                    (run / f).unlink(missing_ok=True)
                 shutil.rmtree(tmp, ignore_errors=True)
                 tmp.mkdir(parents=True)
                 t0 = time.perf_counter()

@@ -165,8 +165,7 @@ def run_sweep(path, out_dir, scheduler=None, *, workers: int | None = None, full
         clean_temps(out)
         rows = {}
         for ov in st["points"]:
-            pid = point_id(ov)
-            clean_temps(out / "points" / pid)
+            pid = point_id(ov)  # (a point folder's temporary files are cleaned by its run, under its lock)
             f = out / "points" / pid / "row.json"
             if f.is_file():
                 try:

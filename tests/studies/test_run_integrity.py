@@ -23,11 +23,13 @@ def ran(caplog) -> list[str]:
     return [s for s in STAGES if re.search(rf"\] {s} \.\.\.", caplog.text)]
 
 
-def resume(exp, run, caplog, **kw):
+def resume(exp, run, caplog, until="piv", **kw):
+    """Run (or resume) up to ``until`` (default: all but the report, whose figures would
+    only cost time here); returns the per-stage results and the stages that ran."""
     caplog.clear()
     with caplog.at_level(logging.INFO, logger="mitpiv"):
-        m = run_experiment(exp, run, **kw)
-    return m, ran(caplog)
+        r = run_experiment(exp, run, until=until, **kw)
+    return r.stages, ran(caplog)
 
 
 def test_edit_then_resume_reruns_exactly_the_affected_stages(tmp_path, caplog, monkeypatch):
@@ -35,25 +37,28 @@ def test_edit_then_resume_reruns_exactly_the_affected_stages(tmp_path, caplog, m
     shutil.copy(SCENE, xml)
     exp = tiny_experiment(tmp_path, xml=xml)
     run = tmp_path / "run"
-    m0, stages = resume(exp, run, caplog)
-    assert stages == list(STAGES)
+    m0, stages = resume(exp, run, caplog, until=None)
+    assert stages == list(STAGES) and (run / "metrics.json").is_file()
     # the scene file rewritten with the same content (new mtime): nothing reruns
     xml.write_bytes(xml.read_bytes())
     assert resume(exp, run, caplog)[1] == []
     # cam0's focal length 85 -> 50 mm in the scene file: the render and every later stage
-    # rerun; the particles (which do not read the scene) are kept
+    # rerun (here first the render alone, then the rest); the particles (which do not read
+    # the scene) are kept
     text = xml.read_text()
     cam0 = text.index('id="cam0"')
     edited = text[:cam0] + text[cam0:].replace('name="focal_length_mm" value="85"',
                                                'name="focal_length_mm" value="50"', 1)
     assert edited != text
     xml.write_text(edited)
+    assert resume(exp, run, caplog, until="render")[1] == ["render"]
+    assert not (run / "metrics.json").exists()  # the earlier run's summary no longer holds
     m1, stages = resume(exp, run, caplog)
-    assert stages == ["render", "reconstruct", "evaluate", "piv", "report"]
+    assert stages == ["reconstruct", "evaluate", "piv"]
     assert 'value="50"' in (run / "render" / "scene.xml").read_text()
     assert m1["evaluate"] != m0["evaluate"]  # a fresh run's numbers, not the old ones
-    # only a PIV setting: only piv and its report
-    assert resume(exp, run, caplog, overrides={"piv.overlap": 0.25})[1] == ["piv", "report"]
+    # only a PIV setting: only piv
+    assert resume(exp, run, caplog, overrides={"piv.overlap": 0.25})[1] == ["piv"]
     # a corrupt output (one byte changed): its stage reruns; the reconstruction gives the
     # same bytes again, so the stages after it (keyed on its outputs' checksums) are kept
     ov = {"piv.overlap": 0.25}
@@ -77,10 +82,10 @@ def test_edit_then_resume_reruns_exactly_the_affected_stages(tmp_path, caplog, m
 
     real = runner.package_version
     monkeypatch.setattr(runner, "package_version", lambda n: "0.0-other" if n == "mitsuba" else real(n))
-    assert resume(exp, run, caplog, overrides=ov)[1] == ["render", "reconstruct", "evaluate", "piv", "report"]
+    assert resume(exp, run, caplog, overrides=ov)[1] == ["render", "reconstruct", "evaluate", "piv"]
     # another mitpiv version: every stage reruns
     monkeypatch.setattr("mitpiv.version.__version__", "0.0-other")
-    assert resume(exp, run, caplog, overrides=ov)[1] == list(STAGES)
+    assert resume(exp, run, caplog, overrides=ov)[1] == list(STAGES[:-1])
 
 
 def test_render_key_covers_the_files_the_scene_names(tmp_path):

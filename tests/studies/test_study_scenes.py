@@ -52,12 +52,12 @@ def test_forward_scatter_is_brighter_than_backward(tmp_path):
 
 def _imaged_per_pixel(particles_dir, cfg, sensor_id, res):
     """Truth particles of frame 0 that project inside a pinhole sensor, per pixel."""
+    import shutil
+
     from mitpiv.io import read_truth
     from mitpiv.reconstruct import mapping_from_metadata
     from mitpiv.render.render import sensor_model
     from mitpiv.render.scene import load_scene
-
-    import shutil
 
     pts = read_truth(particles_dir / "truth.npz")["positions_mm"][0]
     # the scene reads particles_$frame.ply beside itself: a copy of it in the particles folder
