@@ -125,7 +125,7 @@ def stack_output(shape, out=None, what: str = "stack"):
     path = Path(out)
     if path.suffix != ".npy":
         raise ConfigError(f"{what}: 'out' must be a .npy file, got {str(path)!r}.")
-    with atomic_path(path, suffix=".npy") as tmp:
+    with atomic_path(path, suffix=".npy", size_bytes=4 * math.prod(shape)) as tmp:
         arr = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=shape)
         try:
             yield arr
