@@ -150,7 +150,9 @@ def test_a_killed_worker_loses_and_duplicates_no_point(tmp_path):
     restarts it, Dask reruns the point, which resumes in its folder (the dead worker's lock
     went with it; its temporary stage folder is removed); the sweep ends with each point
     exactly once, ok, and no temporary file. The study runs on an existing cluster given by
-    its scheduler address."""
+    its scheduler address. Then the base experiment changes: the sweep reruns its points
+    (keyed on the resolved experiment, not on their overrides), each only from the stage
+    the change reaches."""
     import pandas as pd
     from dask.distributed import Client, LocalCluster
 
@@ -179,6 +181,17 @@ def test_a_killed_worker_loses_and_duplicates_no_point(tmp_path):
         t.start()
         df = run_sweep(study, out, scheduler=cluster.scheduler_address)
         t.join(timeout=5)
+        # the base experiment changes (a PIV setting): the points are not taken from the table
+        # but rerun, each in its folder, where only the stages the change reaches run again
+        points = [out / "points" / p for p in df["point"]]
+        renders = [(p / "render" / "stage.json").read_bytes() for p in points]
+        pivs = [(p / "piv" / "stage.json").read_bytes() for p in points]
+        exp = tmp_path / "exp.toml"
+        exp.write_text(exp.read_text().replace("[piv]\n", "[piv]\nthreshold = 3.0\n"))
+        df2 = run_sweep(study, out, scheduler=cluster.scheduler_address)
+        assert [(p / "render" / "stage.json").read_bytes() for p in points] == renders
+        assert all((p / "piv" / "stage.json").read_bytes() != r for p, r in zip(points, pivs, strict=True))
+        assert list(df2["point"]) == list(df["point"]) and list(df2["status"]) == ["ok", "ok"]
     assert killed == pids  # the worker was killed mid-point
     assert list(df["status"]) == ["ok", "ok"] and df["frame0.Q"].notna().all()
     assert df["point"].is_unique and len(df) == 2
