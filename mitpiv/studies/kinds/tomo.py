@@ -27,6 +27,7 @@ against the flow), ``report`` (report.md and figures, :mod:`mitpiv.studies.repor
 
 from __future__ import annotations
 
+import os
 import shutil
 from functools import cache
 from pathlib import Path
@@ -36,7 +37,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from mitpiv.errors import ConfigError
-from mitpiv.studies.runner import Kind, Stage, StageContext
+from mitpiv.studies.runner import RENDER_PACKAGES, Kind, Stage, StageContext
 from mitpiv.studies.schema import Table, Vec3, discriminated, model_from_signature
 
 FRAMES = (0, 1)
@@ -248,9 +249,48 @@ def stage_particles(ctx: StageContext) -> dict:
         write_particles_ply(out / f"particles_{k}.ply", p, particles.diameters_um, proxy_radius_mm=s.proxy_radius_mm)
     write_truth(out / "truth.npz", positions_mm=[particles.positions_mm, p1], times_s=[0.0, dt],
                 diameters_um=particles.diameters_um, flow=flow.to_dict(), extra={"seed": cfg.seed})
-    # the scene reads particles_$frame.ply beside itself: the run gets its own copy of the XML
-    shutil.copy(cfg.scene.xml, out / "scene.xml")
     return {"n_particles": len(particles)}
+
+
+def _uses_density(cfg) -> bool:
+    return cfg.seeding.ppp is not None or cfg.seeding.particles_per_microlens is not None
+
+
+def scene_files(cfg) -> list[Path]:
+    """The files outside the run folder that reading the scene touches: the scene XML and
+    every file it names (``filename`` attributes and ``<string name="filename">`` values,
+    ``$name`` substituted from its defaults and ``[scene] params``, relative names resolved
+    against its folder), except the particle files, which the run makes. Their content is
+    part of the render stage's key. Parsed with the standard library (no Mitsuba import)."""
+    import xml.etree.ElementTree as ET
+
+    xml = Path(cfg.scene.xml)
+    out = [xml]
+    try:
+        root = ET.parse(xml).getroot()
+    except (ET.ParseError, OSError):
+        return out  # the render stage reports the broken file
+    values = {d.get("name"): d.get("value") for d in root.iter("default")}
+    values.update({k: str(v) for k, v in cfg.scene.params.items()})
+    made = {id(s) for shape in root.iter("shape") if shape.get("type") in ("ellipsoidsmesh", "ellipsoids")
+            for s in shape.findall("string")}
+    names = []
+    for el in root.iter():
+        if el.get("filename"):
+            names.append(el.get("filename"))
+        elif el.tag == "string" and el.get("name") == "filename" and id(el) not in made and el.get("value"):
+            names.append(el.get("value"))
+    for n in names:
+        for frame in FRAMES:
+            v = {**values, "frame": str(frame)}
+            text = n
+            for k in sorted(v, key=len, reverse=True):  # as Mitsuba substitutes: each $name, longest first
+                text = text.replace(f"${k}", str(v[k]))
+            p = Path(text)
+            p = p if p.is_absolute() else xml.parent / p
+            if p not in out:
+                out.append(p)
+    return out
 
 
 def count_for_density(cfg, out: Path) -> int:
@@ -262,13 +302,19 @@ def count_for_density(cfg, out: Path) -> int:
     from mitpiv.streams import derived_seed
 
     s = cfg.seeding
-    # the scene reads particles_$frame.ply beside itself: a one-particle placeholder to load it
-    xml = out / "scene.xml"
-    shutil.copy(cfg.scene.xml, xml)
-    centre = 0.5 * (np.asarray(s.box_min_mm, float) + np.asarray(s.box_max_mm, float))
-    for k in FRAMES:
-        write_particles_ply(out / f"particles_{k}.ply", centre[None], 1.0, proxy_radius_mm=0.01)
-    sc = load_scene(xml, frame=0, params=cfg.scene.params)
+    # the scene reads particles_$frame.ply beside itself: a copy with one-particle placeholders
+    # in a scratch folder (removed: not an output of the stage)
+    scratch = out / ".density.tmp"
+    scratch.mkdir()
+    try:
+        xml = scratch / "scene.xml"
+        shutil.copy(cfg.scene.xml, xml)
+        centre = 0.5 * (np.asarray(s.box_min_mm, float) + np.asarray(s.box_max_mm, float))
+        for k in FRAMES:
+            write_particles_ply(scratch / f"particles_{k}.ply", centre[None], 1.0, proxy_radius_mm=0.01)
+        sc = load_scene(xml, frame=0, params=cfg.scene.params)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
     sensors = {(x.id() or f"sensor{i}"): x for i, x in enumerate(sc.sensors())}
     wanted = s.density_sensor or (cfg.render.sensors or [next(iter(sensors))])[0]
     if wanted not in sensors:
@@ -288,9 +334,24 @@ def stage_render(ctx: StageContext) -> dict:
     from mitpiv.render.render import render_scene
 
     cfg = ctx.cfg
-    files = render_scene(ctx.input("particles", "scene.xml"), out_dir=ctx.out, frames=FRAMES,
-                         params=cfg.scene.params, spp=cfg.render.spp, seed=cfg.seed, progress=ctx.progress,
-                         sensors=cfg.render.sensors)
+    # the scene reads particles_$frame.ply beside itself: the stage keeps its own copy of the
+    # XML (the scene it rendered) and links the particle files beside it while it renders
+    xml = ctx.out / "scene.xml"
+    shutil.copy(cfg.scene.xml, xml)
+    links = []
+    try:
+        for k in FRAMES:
+            src, dst = ctx.input("particles", f"particles_{k}.ply"), ctx.out / f"particles_{k}.ply"
+            try:
+                os.link(src, dst)
+            except OSError:  # a file system without hard links
+                shutil.copy(src, dst)
+            links.append(dst)
+        files = render_scene(xml, out_dir=ctx.out, frames=FRAMES, params=cfg.scene.params, spp=cfg.render.spp,
+                             seed=cfg.seed, progress=ctx.progress, sensors=cfg.render.sensors)
+    finally:
+        for f in links:
+            f.unlink(missing_ok=True)
     return {"images": [f.name for f in files]}
 
 
@@ -471,8 +532,11 @@ def stage_report(ctx: StageContext) -> dict:
 
 
 def stages(cfg) -> list[Stage]:
-    out = [Stage("particles", ("seed", "seeding", "flow", "scene"), stage_particles),
-           Stage("render", ("scene", "render"), stage_render)]
+    # the particles stage reads the scene (with Mitsuba) only to turn a density into a count
+    dens = _uses_density(cfg)
+    out = [Stage("particles", ("seed", "seeding", "flow") + (("scene",) if dens else ()), stage_particles,
+                 files=scene_files if dens else None, packages=RENDER_PACKAGES if dens else ()),
+           Stage("render", ("scene", "render"), stage_render, files=scene_files, packages=RENDER_PACKAGES)]
     if cfg.sensor is not None:
         out.append(Stage("sensor", ("sensor",), stage_sensor))
     out += [Stage("reconstruct", ("reconstruction",), stage_reconstruct),
