@@ -35,6 +35,8 @@ from mitpiv.progress import Progress, track
 log = logging.getLogger(__name__)
 
 REPLACE_METHODS = ("median", "interpolation")
+#: Correlation kinds of :func:`piv3d`.
+CORRELATIONS = ("fft", "ncc")
 
 
 @dataclass
@@ -302,6 +304,104 @@ def _correlate(a, b, normalised, width):
     return disp, np.where(valid, c, 0.0), snr, valid
 
 
+def _box_sums(x, w_zyx):
+    """Sums of ``x`` (n, Z, Y, X) over every (wz, wy, wx) box fully inside: (n, Z-wz+1, Y-wy+1, X-wx+1),
+    from a zero-padded summed-volume table (float64)."""
+    c = np.pad(np.cumsum(np.cumsum(np.cumsum(x, axis=1, dtype=np.float64), axis=2), axis=3),
+               ((0, 0), (1, 0), (1, 0), (1, 0)))
+    wz, wy, wx = w_zyx
+    return (c[:, wz:, wy:, wx:] - c[:, :-wz, wy:, wx:] - c[:, wz:, :-wy, wx:] - c[:, wz:, wy:, :-wx]
+            + c[:, :-wz, :-wy, wx:] + c[:, :-wz, wy:, :-wx] + c[:, wz:, :-wy, :-wx] - c[:, :-wz, :-wy, :-wx])
+
+
+def normalised_cross_correlation(template, search):
+    """Normalised cross-correlation coefficient (Lewis 1995) of templates in larger search
+    regions: the channel-tomo paper's eq. (3),
+
+    ``gamma(u) = sum_x [F(x + u) - Fbar_u] [T(x) - Tbar]
+    / sqrt(sum_x [F(x + u) - Fbar_u]^2 sum_x [T(x) - Tbar]^2)``
+
+    with ``Fbar_u`` the mean of ``F`` under the template at shift ``u`` and the sums over the
+    template's voxels. The numerator is an FFT correlation (``sum_x T'(x) = 0`` removes
+    ``Fbar_u``); the local energies of ``F`` come from summed-volume tables.
+
+    Parameters
+    ----------
+    template : (n, wz, wy, wx) array
+        Interrogation windows T (first exposure).
+    search : (n, wz + 2 mz, wy + 2 my, wx + 2 mx) array
+        Search regions F (second exposure) centred on the templates.
+
+    Returns
+    -------
+    (n, 2 mz + 1, 2 my + 1, 2 mx + 1) float64 array
+        ``gamma`` at integer shifts ``u = index - m`` (z, y, x); 0 where either factor of the
+        denominator vanishes (a flat template or a flat region of F).
+    """
+    from scipy import fft
+
+    t = np.asarray(template, dtype=np.float64)
+    f = np.asarray(search, dtype=np.float64)
+    w = t.shape[1:]
+    if t.ndim != 4 or f.ndim != 4 or f.shape[0] != t.shape[0] or any(
+            (b - a) < 0 or (b - a) % 2 for a, b in zip(w, f.shape[1:], strict=True)):
+        raise ConfigError(f"normalised_cross_correlation: search {f.shape} must be the template {t.shape} grown by "
+                          f"an even number of voxels per axis, with the same number of windows.")
+    tp = t - t.mean(axis=(1, 2, 3), keepdims=True)
+    et = np.sum(tp * tp, axis=(1, 2, 3))
+    big = f.shape[1:]
+    ft = fft.rfftn(tp, s=big, axes=(1, 2, 3), workers=-1)
+    ff = fft.rfftn(f, axes=(1, 2, 3), workers=-1)
+    num = fft.irfftn(np.conj(ft) * ff, s=big, axes=(1, 2, 3), workers=-1)
+    nz, ny, nx = (b - a + 1 for a, b in zip(w, big, strict=True))
+    num = num[:, :nz, :ny, :nx]  # shifts 0..2m: no wrap-around (x + u < w + 2m)
+    s1 = _box_sums(f, w)
+    s2 = _box_sums(f * f, w)
+    ef = np.maximum(s2 - s1 * s1 / math.prod(w), 0.0)
+    den = np.sqrt(ef * et[:, None, None, None])
+    scale = np.max(den) if den.size else 0.0
+    ok = den > 1e-12 * max(scale, 1e-300)
+    return np.where(ok, num / np.where(ok, den, 1.0), 0.0)
+
+
+def _correlate_ncc(a, b_big, margin_zyx, width):
+    """Like :func:`_correlate` for templates ``a`` in search regions ``b_big`` grown by
+    ``margin_zyx`` per side: the peak of :func:`normalised_cross_correlation`."""
+    n = a.shape[0]
+    g = normalised_cross_correlation(a, b_big)
+    mz, my, mx = margin_zyx
+    sz, sy, sx = g.shape[1:]
+    flat = g.reshape(n, -1)
+    arg = np.argmax(flat, axis=1)
+    pk, pj, pi = np.unravel_index(arg, (sz, sy, sx))
+    r = np.arange(n)
+    c = flat[r, arg]
+    offs = []
+    for ax, (p, m, size) in enumerate(((pi, mx, sx), (pj, my, sy), (pk, mz, sz))):
+        lo, hi = np.maximum(p - 1, 0), np.minimum(p + 1, size - 1)
+        idx_lo = [pk, pj, pi]
+        idx_hi = [pk, pj, pi]
+        idx_lo[2 - ax] = lo
+        idx_hi[2 - ax] = hi
+        edge = (p == 0) | (p == size - 1)  # a peak on the search border: no sub-voxel fit
+        sub = _gauss3(g[r, idx_lo[0], idx_lo[1], idx_lo[2]], c, g[r, idx_hi[0], idx_hi[1], idx_hi[2]])
+        offs.append(p - m + np.where(edge, 0.0, sub))
+    disp = np.column_stack(offs)
+    o = np.arange(-width, width + 1)
+    bk = np.clip(pk[:, None, None, None] + o[None, :, None, None], 0, sz - 1)
+    bj = np.clip(pj[:, None, None, None] + o[None, None, :, None], 0, sy - 1)
+    bi = np.clip(pi[:, None, None, None] + o[None, None, None, :], 0, sx - 1)
+    masked = g.copy()
+    masked[r[:, None, None, None], bk, bj, bi] = -np.inf
+    second = masked.reshape(n, -1).max(axis=1)
+    valid = (np.ptp(a.reshape(n, -1), axis=1) > 0) & (c != 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        snr = np.where(second > 0, c / np.where(second > 0, second, 1.0), np.inf)
+    snr = np.where(valid, np.minimum(snr, 1e6), 0.0)
+    disp[~valid] = 0.0
+    return disp, np.where(valid, c, 0.0), snr, valid
+
+
 # ---------------------------------------------------------------------------------- piv3d
 
 
@@ -321,7 +421,8 @@ def _smooth_predictor(d, step, window, kind):
 
 
 def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: bool = True,
-          interpolation: str = "cubic", normalised: bool = False, validate: bool = True, threshold: float = 2.0,
+          interpolation: str = "cubic", normalised: bool = False, correlation: str = "fft", search_margin=None,
+          validate: bool = True, threshold: float = 2.0,
           epsilon: float = 0.1, replace: str | None = "median", width: int = 2, dt_s: float | None = None,
           smooth: str | None = "gaussian", chunk_mb: float = 256.0, progress: Progress = None) -> VectorField:
     """Multi-pass 3D cross-correlation PIV between two volumes on ``grid``.
@@ -335,6 +436,16 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
         window shifting); True: both volumes are resampled at x -/+ predictor/2
         (``interpolation`` "linear" or "cubic" B-spline) and the residual is added.
     normalised : divide the correlation by sqrt(E_a E_b), so ``peak`` is a coefficient.
+    correlation : "fft" (default: circular FFT correlation of equal windows, mean-subtracted)
+        or "ncc" (the normalised cross-correlation coefficient of Lewis 1995, the
+        channel-tomo paper's eq. 3: the first volume's window is the template, searched in
+        a region of the second grown by ``search_margin`` voxels per side, with the local
+        mean and energy of the region under the template at every shift; see
+        :func:`normalised_cross_correlation`). ``peak`` is then gamma at its maximum and the
+        displacement residual of a pass is limited to the margin (``normalised`` is ignored).
+    search_margin : voxels per side of the NCC search region: one int, (m_x, m_y, m_z), or
+        None (half the window in the first pass, which has no predictor, a quarter in the
+        later ones; at least 2).
     smooth : low-pass filter of the predictor between passes ("gaussian", sigma = window/6;
         "box", 3x3x3; None): iterative deformation with overlapping windows amplifies
         short wavelengths without it (Schrijer & Scarano 2008).
@@ -359,6 +470,14 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
         raise ConfigError(f"piv3d: width must be an integer >= 1 voxel, got {width!r}.")
     if dt_s is not None:
         dt_s = check_positive("dt_s", dt_s, owner="piv3d", unit="s")
+    if correlation not in CORRELATIONS:
+        raise ConfigError(f"piv3d: correlation={correlation!r} is not one of {CORRELATIONS}.")
+    if search_margin is not None:
+        sm = (search_margin,) * 3 if np.isscalar(search_margin) else tuple(search_margin)
+        if len(sm) != 3 or any(int(v) != v or v < 1 for v in sm):
+            raise ConfigError(f"piv3d: search_margin must be an integer >= 1 or three (x, y, z) [voxels], "
+                              f"got {search_margin!r}.")
+        search_margin = tuple(int(v) for v in sm)
     if smooth not in (None, "gaussian", "box"):
         raise ConfigError(f"piv3d: smooth={smooth!r} is not None, 'gaussian' or 'box'.")
     passes = _passes(windows, overlap)
@@ -394,7 +513,13 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
             shift_a = -(s_int // 2)
             shift_b = s_int + shift_a
             base = s_int[:, ::-1].astype(np.float64)
-        pad = int(max(np.abs(shift_a).max(initial=0), np.abs(shift_b).max(initial=0))) + 1
+        if correlation == "ncc":
+            # without a predictor the whole displacement must fit the margin: half a window
+            m_xyz = search_margin or tuple(max(2, wi // (2 if prev is None else 4)) for wi in w)
+            m_zyx = np.array(m_xyz[::-1])
+        else:
+            m_zyx = np.zeros(3, dtype=np.int64)
+        pad = int(max(np.abs(shift_a).max(initial=0), np.abs(shift_b).max(initial=0))) + 1 + int(m_zyx.max())
         pa = np.pad(va, pad)
         pb = np.pad(vb, pad)
         n = starts.shape[0]
@@ -402,12 +527,17 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
         peak = np.empty(n)
         snr = np.empty(n)
         valid = np.empty(n, bool)
-        per = max(1, int(chunk_mb * 2**20 / (8 * 4 * math.prod(w))))
+        per = max(1, int(chunk_mb * 2**20 / (8 * 4 * math.prod(w)))) if correlation == "fft" else max(
+            1, int(chunk_mb * 2**20 / (8 * 8 * math.prod(np.add(w, 2 * m_zyx[::-1])))))
         for c0 in range(0, n, per):
             sl = slice(c0, min(n, c0 + per))
             wa = _gather(pa, pad, starts[sl] + shift_a[sl], w_zyx)
-            wb = _gather(pb, pad, starts[sl] + shift_b[sl], w_zyx)
-            d, pk, sn, ok = _correlate(wa, wb, normalised, int(width))
+            if correlation == "ncc":
+                wb = _gather(pb, pad, starts[sl] + shift_b[sl] - m_zyx, tuple(np.add(w_zyx, 2 * m_zyx)))
+                d, pk, sn, ok = _correlate_ncc(wa, wb, tuple(m_zyx), int(width))
+            else:
+                wb = _gather(pb, pad, starts[sl] + shift_b[sl], w_zyx)
+                d, pk, sn, ok = _correlate(wa, wb, normalised, int(width))
             disp[sl] = base[sl] + d
             peak[sl], snr[sl], valid[sl] = pk, sn, ok
         del pa, pb
@@ -432,7 +562,8 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
             pred_next = _smooth_predictor(pred_next, step, w, smooth)
         prev = ((cz, cy, cx), pred_next)
     fld.info.update({"passes": [{"window_vox": list(w), "step_vox": list(s)} for w, s in passes], "deform": bool(deform),
-                     "interpolation": interpolation, "normalised": bool(normalised), "seconds": time.perf_counter() - t0,
+                     "interpolation": interpolation, "normalised": bool(normalised), "correlation": correlation,
+                     "seconds": time.perf_counter() - t0,
                      "pass_seconds": timings, "outlier_ratio": fld.outlier_ratio,
                      "invalid": int((~fld.valid).sum())})
     log.info("piv3d: %d passes, %d vectors, %.1f %% outliers, %d invalid, %.1f s", len(passes), fld.valid.size,

@@ -30,6 +30,7 @@ __all__ = [
     "ABC",
     "RoundJet",
     "GridFlow",
+    "Channel",
     "flow_from_dict",
 ]
 
@@ -375,9 +376,129 @@ class GridFlow(Flow):
         return out
 
 
+class Channel(Flow):
+    """Turbulent channel flow at Re_tau = 934 in wall units: DNS mean profile plus
+    divergence-free synthetic turbulence (:mod:`mitpiv.physics.channel`), frozen in time.
+
+    The local frame: ``streamwise`` and ``wall_normal`` unit vectors (spanwise =
+    streamwise x wall_normal); the world point ``center_mm`` sits at wall distance
+    ``center_y_plus`` wall units, so the wall is the plane through
+    ``center_mm - center_y_plus * l_nu * wall_normal``. Wall units come from
+    ``friction_velocity_mm_s`` (u_tau) and the fluid's ``viscosity_mm2_s`` (nu; air 15.1,
+    water 1.0): ``l_nu = nu / u_tau`` [mm]; the channel half-height is ``Re_tau * l_nu``.
+    ``u = u_tau (U+(y+) e_streamwise + u'+(x+))``. The fluctuations reproduce the DNS
+    Reynolds-stress tensor at every y+ in ``y_plus_range`` (default
+    ``(max(60, y_c/2), min(Re_tau, 2 y_c))``); points outside it raise ConfigError.
+    ``modes`` Fourier modes (cost is linear in it), ``seed`` the realisation.
+    """
+
+    kind = "channel"
+
+    def __init__(self, friction_velocity_mm_s: float = 500.0, viscosity_mm2_s: float = 15.1,
+                 center_y_plus: float = 150.0, center_mm=(0.0, 0.0, 0.0), streamwise=(1.0, 0.0, 0.0),
+                 wall_normal=(0.0, 0.0, 1.0), modes: int = 1000, seed: int = 0,
+                 y_plus_range: tuple[float, float] | None = None, profile: str = "delalamo2004_re934"):
+        from mitpiv.physics.channel import SyntheticTurbulence, load_channel_profile
+
+        self.friction_velocity_mm_s = check_positive("friction_velocity_mm_s", friction_velocity_mm_s,
+                                                     owner="Channel", unit="mm/s")
+        self.viscosity_mm2_s = check_positive("viscosity_mm2_s", viscosity_mm2_s, owner="Channel", unit="mm^2/s")
+        self.center_y_plus = check_positive("center_y_plus", center_y_plus, owner="Channel")
+        self.center_mm = np.asarray(center_mm, dtype=float).reshape(3)
+        self.streamwise = _unit(streamwise, "streamwise")
+        self.wall_normal = _unit(wall_normal, "wall_normal")
+        if abs(self.streamwise @ self.wall_normal) > 1e-9:
+            raise ConfigError(f"Channel: 'streamwise' {self.streamwise.tolist()} and 'wall_normal' "
+                              f"{self.wall_normal.tolist()} must be perpendicular.")
+        self.modes, self.seed, self.profile = int(modes), int(seed), str(profile)
+        self.y_plus_range = None if y_plus_range is None else [float(v) for v in y_plus_range]
+        self._profile = load_channel_profile(self.profile)
+        self._turb = SyntheticTurbulence(self._profile, center_y_plus=self.center_y_plus, modes=self.modes,
+                                         seed=self.seed, y_plus_range=self.y_plus_range)
+        self._frame = np.stack([self.streamwise, self.wall_normal, np.cross(self.streamwise, self.wall_normal)])
+
+    @property
+    def viscous_length_mm(self) -> float:
+        """``l_nu = nu / u_tau`` [mm]."""
+        return self.viscosity_mm2_s / self.friction_velocity_mm_s
+
+    @property
+    def re_tau(self) -> float:
+        """Friction Reynolds number of the profile table."""
+        return self._profile.re_tau
+
+    @property
+    def half_height_mm(self) -> float:
+        """Channel half-height ``Re_tau l_nu`` [mm]."""
+        return self.re_tau * self.viscous_length_mm
+
+    @property
+    def frame(self) -> np.ndarray:
+        """(3, 3) rows: the streamwise, wall-normal and spanwise unit vectors (world)."""
+        return self._frame.copy()
+
+    @property
+    def profile_table(self):
+        """The :class:`~mitpiv.physics.channel.ChannelProfile` used."""
+        return self._profile
+
+    @property
+    def turbulence(self):
+        """The :class:`~mitpiv.physics.channel.SyntheticTurbulence` generator."""
+        return self._turb
+
+    def to_plus(self, p_mm) -> np.ndarray:
+        """World points (N, 3) [mm] -> local wall-unit coordinates (N, 3): (x+, y+, z+) with
+        y+ the wall distance and x+, z+ streamwise and spanwise from ``center_mm``."""
+        x = (np.asarray(p_mm, float) - self.center_mm) @ self._frame.T / self.viscous_length_mm
+        x[:, 1] += self.center_y_plus
+        return x
+
+    def wall_distance_plus(self, p_mm) -> np.ndarray:
+        """Wall distance y+ of world points (N, 3) [mm]."""
+        return self.to_plus(np.asarray(p_mm, float).reshape(-1, 3))[:, 1]
+
+    def velocity_plus(self, x_plus) -> np.ndarray:
+        """Velocity in wall units in the local frame at local wall-unit points (N, 3)."""
+        u = self._turb.fluctuation_plus(x_plus)
+        u[:, 0] += self._profile.mean_plus(x_plus[:, 1])
+        return u
+
+    def velocity(self, p, t):
+        return self.friction_velocity_mm_s * (self.velocity_plus(self.to_plus(p)) @ self._frame)
+
+    def window_average(self, p_mm, window_mm, *, y_nodes: int = 24) -> np.ndarray:
+        """Velocity [mm/s] (N, 3) averaged over a box ``window_mm`` (w_x, w_y, w_z) [mm] along
+        the world axes centred on each point ``p_mm`` (N, 3): the fair reference for a PIV
+        vector from a cubic interrogation window (the paper's "averaged DNS").
+
+        The channel's axes must be world axes (up to sign). Along the streamwise and spanwise
+        axes the average is exact (per-mode sinc factors); along the wall normal it is a
+        ``y_nodes``-point Gauss-Legendre quadrature of the mean profile and fluctuations.
+        """
+        p = np.asarray(p_mm, dtype=float).reshape(-1, 3)
+        win = np.broadcast_to(np.asarray(window_mm, dtype=float), (3,))
+        if np.any(win < 0):
+            raise ConfigError(f"Channel.window_average: window_mm must be >= 0, got {win.tolist()}.")
+        a = np.abs(self._frame)
+        if not np.allclose(a, np.round(a), atol=1e-12):
+            raise ConfigError("Channel.window_average: the channel's streamwise and wall_normal axes must be "
+                              f"world axes (got {self.streamwise.tolist()}, {self.wall_normal.tolist()}).")
+        lx, ly, lz = (a @ win) / self.viscous_length_mm  # window sides along the local axes, wall units
+        t, w = np.polynomial.legendre.leggauss(int(y_nodes))
+        x = self.to_plus(p)
+        acc = np.zeros_like(x)
+        for tk, wk in zip(t, w, strict=True):  # a handful of nodes; each one vectorised over points
+            xk = x + np.array([0.0, 0.5 * ly * tk, 0.0])
+            uk = self._turb.fluctuation_plus(xk, box_plus=(lx, lz))
+            uk[:, 0] += self._profile.mean_plus(xk[:, 1])
+            acc += 0.5 * wk * uk
+        return self.friction_velocity_mm_s * (acc @ self._frame)
+
+
 #: Every flow kind by its name (the ``kind`` of a [flow] table and of a truth file's flow).
 FLOW_KINDS = {c.kind: c for c in (Uniform, SolidBody, LambOseen, Burgers, HillVortex, VortexRing, ABC, RoundJet,
-                                  GridFlow)}
+                                  GridFlow, Channel)}
 _KINDS = FLOW_KINDS
 
 

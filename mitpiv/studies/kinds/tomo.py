@@ -165,6 +165,9 @@ class PivTable(Table):
     deform: bool = Field(True, description="window deformation (else integer window shifting)")
     interpolation: Literal["linear", "cubic"] = Field("cubic", description="deformation resampling")
     normalised: bool = Field(False, description="normalised cross-correlation")
+    correlation: Literal["fft", "ncc"] = Field(
+        "fft", description="fft: circular correlation of equal windows; ncc: Lewis normalised coefficient in a "
+        "search region grown by half a window (first pass) or a quarter (later passes)")
     threshold: PosFloat = Field(2.0, description="universal outlier detection threshold")
     replace: Literal["median", "interpolation", "none"] = Field("median", description="outlier replacement")
 
@@ -513,7 +516,7 @@ def stage_piv(ctx: StageContext) -> dict:
     pv = cfg.piv
     field = analysis.piv3d(volume(ctx.run_dir, 0), volume(ctx.run_dir, 1), grid, windows=pv.windows,
                            overlap=pv.overlap, deform=pv.deform, interpolation=pv.interpolation,
-                           normalised=pv.normalised, threshold=pv.threshold,
+                           normalised=pv.normalised, correlation=pv.correlation, threshold=pv.threshold,
                            replace=None if pv.replace == "none" else pv.replace, dt_s=dt, progress=ctx.progress)
     res = analysis.velocity_error(field, flow_from_dict(truth["flow"]))
     metrics = null_metrics(analysis.velocity_error_summary(res), {
