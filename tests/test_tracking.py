@@ -13,6 +13,8 @@ from mitpiv.analysis.particles import assign
 from mitpiv.errors import CalibrationError
 from mitpiv.physics.camera import PinholeCamera, place_camera
 from mitpiv.tracking import OTF, calibrate_otf, detect_peaks, ipr, project_particles, triangulate
+from mitpiv.tracking.metrics import track_metrics
+from mitpiv.tracking.stb import stb
 
 LO = np.array([-7.0, -7.0, -3.5])
 HI = np.array([7.0, 7.0, 3.5])
@@ -115,3 +117,57 @@ def test_ipr_sparse_set_finds_99_percent_within_0p05_px():
     assert good >= IPR_YIELD * p.shape[0], (good, p.shape[0])
     assert len(r) - pairs.shape[0] <= 0.01 * p.shape[0]  # ghosts
     assert np.all(np.isfinite(r.positions_mm)) and np.all(r.intensities > 0)
+
+
+# ---------------------------------------------------------------------- STB
+# Issue 27's acceptance figures for STB
+STB_VELOCITY_REL = 0.01
+STB_ACCELERATION_REL = 0.05
+N_FRAMES, DT_S = 8, 1e-3
+BOX_LO, BOX_HI = LO - [2.5, 0.5, 0.5], HI + [2.5, 0.5, 0.5]  # reconstruction box: every particle's path
+
+
+def sequence(traj, cams, otf):
+    return [project_particles(traj[:, f], 1.0, cams, otf) for f in range(traj.shape[1])]
+
+
+def test_stb_uniform_translation_velocity_within_1_percent():
+    """Particles enter at -x and leave at +x; 3 px displacement per frame."""
+    cams = rig()
+    otf = OTF.uniform(4, sigma_px=1.0, lower_mm=BOX_LO, upper_mm=BOX_HI)
+    rng = np.random.default_rng(5)
+    p0 = rng.uniform(LO - [2.0, 0, 0], HI, (160, 3))
+    u = np.array([240.0, 60.0, -30.0])  # [mm/s]: 0.25 mm = 3.1 px per frame
+    traj = p0[:, None] + u * DT_S * np.arange(N_FRAMES)[None, :, None]
+    tr = stb(sequence(traj, cams, otf), cams, otf, dt_s=DT_S, lower_mm=BOX_LO, upper_mm=BOX_HI, threshold=0.1)
+    vel = np.broadcast_to(u, traj.shape)
+    m = track_metrics(tr, traj, radius_mm=0.08, truth_velocities_mm_s=vel, truth_accelerations_mm_s2=np.zeros_like(traj),
+                      lower_mm=LO, upper_mm=HI, cameras=cams)
+    assert m["yield"] >= 0.95 and m["ghost_fraction"] <= 0.02, m
+    assert m["velocity_error_rel"] <= STB_VELOCITY_REL, m
+    # zero true acceleration: 5 % of the acceleration that would change |u| by itself over the sequence
+    assert m["acceleration_error_mm_s2"] <= STB_ACCELERATION_REL * np.linalg.norm(u) / (N_FRAMES * DT_S), m
+    assert m["correct_track_fraction"] >= 0.95, m
+    inside = np.all((traj >= LO) & (traj <= HI), axis=2)
+    entered = np.flatnonzero(~inside[:, 0] & inside[:, -1])
+    assert entered.size > 0  # the set-up has particles entering the box ...
+    assert np.all(np.isfinite(tr.positions_mm[tr.present])) and np.all(np.isfinite(tr.velocities_mm_s[tr.present]))
+
+
+def test_stb_solid_body_rotation_velocity_1_and_acceleration_5_percent():
+    cams = rig()
+    otf = OTF.uniform(4, sigma_px=1.0, lower_mm=BOX_LO, upper_mm=BOX_HI)
+    rng = np.random.default_rng(6)
+    r = 7.0 * np.sqrt(rng.uniform(0.05, 1.0, 150))
+    th0 = rng.uniform(0, 2 * np.pi, r.size)
+    z = rng.uniform(LO[2], HI[2], r.size)
+    w = 40.0  # [rad/s]: 0.04 rad per frame, up to 3.5 px per frame
+    th = th0[:, None] + w * DT_S * np.arange(N_FRAMES)
+    traj = np.stack([r[:, None] * np.cos(th), r[:, None] * np.sin(th), np.broadcast_to(z[:, None], th.shape)], axis=-1)
+    vel = np.stack([-w * traj[..., 1], w * traj[..., 0], np.zeros(th.shape)], axis=-1)
+    acc = np.stack([-w**2 * traj[..., 0], -w**2 * traj[..., 1], np.zeros(th.shape)], axis=-1)
+    tr = stb(sequence(traj, cams, otf), cams, otf, dt_s=DT_S, lower_mm=BOX_LO, upper_mm=BOX_HI, threshold=0.1)
+    m = track_metrics(tr, traj, radius_mm=0.08, truth_velocities_mm_s=vel, truth_accelerations_mm_s2=acc, cameras=cams)
+    assert m["yield"] >= 0.95 and m["ghost_fraction"] <= 0.02, m
+    assert m["velocity_error_rel"] <= STB_VELOCITY_REL, m
+    assert m["acceleration_error_rel"] <= STB_ACCELERATION_REL, m

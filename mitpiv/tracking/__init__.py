@@ -7,7 +7,9 @@ LPT Challenge's metrics (:mod:`~mitpiv.tracking.metrics`).
 """
 
 from mitpiv.tracking.ipr import IPRResult, auto_threshold, detect_peaks, ipr, mm_per_px, shake, triangulate
-from mitpiv.tracking.otf import OTF, calibrate_otf, project_particles, stamps
+from mitpiv.tracking.metrics import bin_tracks, particle_metrics, track_length_histogram, track_metrics
+from mitpiv.tracking.otf import OTF, add_particles, calibrate_otf, project_particles, stamps
+from mitpiv.tracking.stb import Tracks, link_four, predict, regularise, stb
 
 __all__ = [
     "OTF",
@@ -21,4 +23,14 @@ __all__ = [
     "ipr",
     "auto_threshold",
     "mm_per_px",
+    "add_particles",
+    "Tracks",
+    "link_four",
+    "predict",
+    "regularise",
+    "stb",
+    "particle_metrics",
+    "track_metrics",
+    "track_length_histogram",
+    "bin_tracks",
 ]

@@ -44,7 +44,7 @@ import numpy as np
 from mitpiv.analysis.particles import gauss3_offset
 from mitpiv.errors import ConfigError, check_positive
 from mitpiv.progress import bar
-from mitpiv.tracking.otf import OTF, add_particles, project_particles, stamps
+from mitpiv.tracking.otf import OTF, project_particles, stamps
 
 __all__ = ["IPRResult", "detect_peaks", "triangulate", "shake", "ipr", "auto_threshold", "mm_per_px", "colour_groups"]
 
@@ -335,8 +335,11 @@ def colour_groups(positions_mm, cameras, radius_px: float, *, seed: int = 0) -> 
 
 def _shake_group(res, cameras, otf, pc, ec, s, r, fixed_intensity):
     """One damped Gauss-Newton step of position (and intensity) per particle against its
-    augmented residual in every camera, each coordinate step limited to +-s [mm]."""
+    augmented residual in every camera, each coordinate step limited to +-s [mm]; the
+    residual images ``res`` are updated in place on the particles' windows."""
     wins = [_windows(res[k], cam, otf, k, pc, ec, r) for k, cam in enumerate(cameras)]
+    own_old = [w[3] - np.where(w[2], res[k][np.clip(w[1], 0, res[k].shape[0] - 1), np.clip(w[0], 0, res[k].shape[1] - 1)], 0.0)
+               for k, w in enumerate(wins)]
     m = 3 if fixed_intensity else 4
     jtj = np.zeros((pc.shape[0], m, m))
     jtr = np.zeros((pc.shape[0], m))
@@ -362,10 +365,14 @@ def _shake_group(res, cameras, otf, pc, ec, s, r, fixed_intensity):
     damp = jtj + (1e-3 * diag + 1e-12)[:, :, None] * np.eye(m)
     step = np.linalg.solve(damp, jtr[..., None])[..., 0]
     step = np.nan_to_num(step)
-    pc = pc + np.clip(step[:, :3], -s, s)
-    if not fixed_intensity:
-        ec = np.maximum(ec + step[:, 3], 0.0)
-    return pc, ec
+    pn = pc + np.clip(step[:, :3], -s, s)
+    en = ec if fixed_intensity else np.maximum(ec + step[:, 3], 0.0)
+    # residual update on the same windows: old image back in, new image out
+    for k, cam in enumerate(cameras):
+        cols, rows, inside, aug, prm = wins[k]
+        new = en[:, None, None] * _stamp_on(cam, pn, cols, rows, inside, prm)
+        np.add.at(res[k], (rows[inside], cols[inside]), (own_old[k] - new)[inside])
+    return pn, en
 
 
 def shake(images, cameras, otf: OTF, positions_mm, intensities, *, step_mm: float, iterations: int = 6,
@@ -403,7 +410,6 @@ def shake(images, cameras, otf: OTF, positions_mm, intensities, *, step_mm: floa
             for lo_i in range(0, group.size, chunk):
                 g = group[lo_i:lo_i + chunk]
                 pn, en = _shake_group(res, cameras, otf, p[g], e[g], s, r, fixed_intensity)
-                add_particles(res, np.concatenate([p[g], pn]), np.concatenate([e[g], -en]), cameras, otf)
                 p[g], e[g] = pn, en
     res = [img - pr for img, pr in zip(imgs, project_particles(p, e, cameras, otf), strict=True)]
     return p, e, res
