@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from mitpiv.analysis.particles import assign
-from mitpiv.errors import CalibrationError
+from mitpiv.errors import CalibrationError, ConfigError
+from mitpiv.grid import VoxelGrid
 from mitpiv.physics.camera import PinholeCamera, place_camera
 from mitpiv.tracking import OTF, calibrate_otf, detect_peaks, ipr, project_particles, triangulate
-from mitpiv.tracking.metrics import track_metrics
-from mitpiv.tracking.stb import stb
+from mitpiv.tracking.metrics import bin_tracks, particle_metrics, track_metrics
+from mitpiv.tracking.stb import Tracks, regularise, stb
 
 LO = np.array([-7.0, -7.0, -3.5])
 HI = np.array([7.0, 7.0, 3.5])
@@ -171,3 +172,110 @@ def test_stb_solid_body_rotation_velocity_1_and_acceleration_5_percent():
     assert m["yield"] >= 0.95 and m["ghost_fraction"] <= 0.02, m
     assert m["velocity_error_rel"] <= STB_VELOCITY_REL, m
     assert m["acceleration_error_rel"] <= STB_ACCELERATION_REL, m
+
+
+# ---------------------------------------------------------------------- metrics
+def test_yield_and_ghost_fraction_equal_hand_counts():
+    truth = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0], [9, 9, 9.0]])  # the last one outside the box
+    found = np.array([[0.01, 0, 0],  # truth 0
+                      [1.0, 0.02, 0],  # truth 1
+                      [2.0, 0, 0.03],  # truth 2
+                      [3.5, 0, 0],  # 0.5 from truth 3: beyond the 0.1 radius -> ghost
+                      [5.0, 5.0, 5.0],  # nowhere -> ghost
+                      [0.0, 0.0, 0.05]])  # second candidate for truth 0 (one-to-one) -> ghost
+    m = particle_metrics(found, truth, radius_mm=0.1, lower_mm=(-1, -1, -1), upper_mm=(6, 6, 6))
+    assert (m["n_true"], m["n_found"], m["n_matched"]) == (4, 6, 3)
+    assert m["yield"] == 3 / 4 and m["ghost_fraction"] == 3 / 6 and m["missed_fraction"] == 1 / 4
+    assert m["position_error_mm"] == pytest.approx((0.01 + 0.02 + 0.03) / 3, rel=1e-12)
+
+
+def _tracks(pos, dt=1.0):
+    pos = np.asarray(pos, dtype=float)
+    return Tracks(pos, np.where(np.isfinite(pos[..., 0]), 1.0, np.nan), dt)
+
+
+def test_track_metrics_count_correct_tracks_and_lengths():
+    n_f = 5
+    t = np.arange(n_f, dtype=float)
+    truth = np.stack([np.stack([t, 0 * t, 0 * t], -1), np.stack([t, 0 * t + 3, 0 * t], -1)])  # two particles
+    good = truth[0].copy()
+    swap = np.concatenate([truth[1][:2], truth[0][2:]])  # jumps from particle 1 to particle 0
+    short = np.full((n_f, 3), np.nan)
+    short[3:] = truth[1][3:]
+    tr = _tracks(np.stack([good, swap, short]))
+    m = track_metrics(tr, truth, radius_mm=0.1)
+    # frames 2-4: particle 0 is claimed by two tracks, one becomes a ghost
+    assert m["n_true"] == 10 and m["n_found"] == 12 and m["n_matched"] == 10 - 1
+    assert m["correct_track_fraction"] == pytest.approx(2 / 3)  # 'swap' changes particle
+    assert m["length_histogram"] == [0, 0, 1, 0, 0, 2]
+
+
+def test_regularise_recovers_a_quadratic_path_exactly_and_bins():
+    dt = 0.01
+    t = np.arange(9) * dt
+    a = np.array([3.0, -1.0, 0.5])
+    v0 = np.array([1.0, 2.0, -4.0])
+    p = np.array([0.1, 0.2, 0.3]) + v0 * t[:, None] + 0.5 * a * t[:, None] ** 2
+    pos = np.full((2, 12, 3), np.nan)
+    pos[0, 1:10] = p
+    pos[1, 5:9] = p[:4] + [1.0, 0, 0]  # a 4-frame track
+    r = regularise(_tracks(pos, dt), half_window=3)
+    np.testing.assert_allclose(r.positions_mm[0, 1:10], p, atol=1e-12)
+    np.testing.assert_allclose(r.velocities_mm_s[0, 1:10], v0 + a * t[:, None], atol=1e-9)
+    np.testing.assert_allclose(r.accelerations_mm_s2[0, 1:10], np.broadcast_to(a, (9, 3)), atol=1e-6)
+    assert np.isnan(r.velocities_mm_s[0, 0]).all() and np.isfinite(r.velocities_mm_s[1, 5:9]).all()
+    # Eulerian bins: one voxel holds the whole first track, another the short one
+    grid = VoxelGrid((-0.5, -0.5, -0.5), (1.0, 1.0, 1.0), (1, 1, 2))
+    b = bin_tracks(r, grid)
+    assert b["count"].tolist() == [[[9, 4]]]
+    vt = v0 + a * t[:, None]
+    np.testing.assert_allclose(b["mean_mm_s"][0, 0, 0], vt.mean(axis=0), atol=1e-9)
+    np.testing.assert_allclose(b["std_mm_s"][0, 0, 0], vt.std(axis=0), atol=1e-9)
+    np.testing.assert_allclose(b["mean_mm_s"][0, 0, 1], vt[:4].mean(axis=0), atol=1e-9)
+
+
+# ---------------------------------------------------------------------- hard cases
+def test_two_particles_overlapping_in_every_camera():
+    cams = rig()
+    otf = OTF.uniform(4, sigma_px=1.0, lower_mm=LO, upper_mm=HI)
+    pair = np.array([[1.0, 1.0, 0.0], [1.02, 1.0, 0.01]])  # 0.3 px apart in every view
+    imgs = project_particles(pair, 1.0, cams, otf)
+    r = ipr(imgs, cams, otf, lower_mm=LO, upper_mm=HI, threshold=0.1)
+    assert 1 <= len(r) <= 2 and np.all(np.isfinite(r.positions_mm))
+    assert np.all(np.linalg.norm(r.positions_mm - pair.mean(axis=0), axis=1) < 0.05)
+    assert r.intensities.sum() == pytest.approx(2.0, rel=0.05)  # the light of both is explained
+    assert max(np.abs(x).max() for x in r.residuals) < 0.05
+
+
+def test_camera_without_particles_and_empty_frames():
+    cams = rig()
+    otf = OTF.uniform(4, sigma_px=1.0, lower_mm=LO, upper_mm=HI)
+    p = particles(0.002, seed=8)
+    imgs = project_particles(p, 1.0, cams, otf)
+    imgs[2][:] = 0.0  # camera 2 sees nothing in this frame
+    r = ipr(imgs, cams, otf, lower_mm=LO - 0.5, upper_mm=HI + 0.5, threshold=0.1)
+    assert np.all(np.isfinite(r.positions_mm)) and np.all(np.isfinite(r.intensities))
+    m = particle_metrics(r.positions_mm, p, radius_mm=0.08)
+    assert m["yield"] >= 0.9 and m["ghost_fraction"] <= 0.05, m
+    empty = ipr([np.zeros((256, 256))] * 4, cams, otf, lower_mm=LO, upper_mm=HI, threshold=0.1)
+    assert len(empty) == 0
+
+
+def test_one_frame_sequence_is_a_clear_error():
+    cams = rig()
+    otf = OTF.uniform(4, sigma_px=1.0, lower_mm=LO, upper_mm=HI)
+    imgs = project_particles(particles(0.001), 1.0, cams, otf)
+    with pytest.raises(ConfigError, match="at least 4 frames"):
+        stb([imgs], cams, otf, dt_s=1e-3, lower_mm=LO, upper_mm=HI)
+
+
+def test_calibration_error_above_tolerance_is_a_clear_error():
+    cams = rig()
+    otf = OTF.uniform(4, sigma_px=1.0, lower_mm=LO, upper_mm=HI)
+    imgs = project_particles(particles(0.002, seed=9), 1.0, cams, otf)
+    with pytest.raises(ConfigError, match="reaches the triangulation"):
+        ipr(imgs, cams, otf, lower_mm=LO, upper_mm=HI, tolerance_px=0.5, calibration_error_px=0.8)
+    bad = [PinholeCamera.from_dict(c.to_dict()) for c in cams]
+    bad[1].position_mm = bad[1].position_mm + [0.3, 0.0, 0.0]  # about 3 px of reprojection error
+    with pytest.raises(ConfigError, match="calibration does not fit"):
+        ipr(imgs, bad, otf, lower_mm=LO, upper_mm=HI, threshold=0.1, tolerance_px=1.0)

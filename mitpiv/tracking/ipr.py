@@ -454,7 +454,8 @@ def _prune(p, e, lo, hi, min_intensity, dup_mm):
 
 def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolerance_px: float = 1.0,
         outer_loops: int = 2, reduced_loops: int = 1, shake_iterations: int = 3, shake_step_px: float = 0.5,
-        final_iterations: int = 8, min_intensity: float = 0.1, duplicate_px: float = 1.0, initial=None, progress=None) -> IPRResult:
+        final_iterations: int = 8, min_intensity: float = 0.1, duplicate_px: float = 1.0, initial=None,
+        calibration_error_px: float | None = None, progress=None) -> IPRResult:
     """Iterative particle reconstruction of one frame (Wieneke 2013).
 
     Parameters
@@ -475,7 +476,18 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
     min_intensity : particles below this fraction of the median intensity are removed.
     duplicate_px : particles closer than this [px, object-space equivalent] merge.
     initial : optional ``(positions_mm, intensities)`` to start from (STB's predictions).
+    calibration_error_px : the calibration's reprojection error [px], when known; it must
+        be below ``tolerance_px`` (else :class:`ConfigError`).
     progress : see :mod:`mitpiv.progress`.
+
+    Raises
+    ------
+    ConfigError
+        When the calibration error reaches the tolerance, or when the first loop finds at
+        least 20 peaks in every camera but fewer than 5 % of them triangulate within the
+        tolerance (the cameras' calibration does not fit the images).
+
+    A camera that shows no peak at all in the frame (a dropped image) is left out.
     """
     imgs = _check_images(images, cameras, "ipr")
     if otf.n_cameras != len(cameras):
@@ -489,18 +501,39 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
         if isinstance(v, bool) or int(v) != v or v < 0:
             raise ConfigError(f"ipr: '{name}' must be a non-negative integer, got {v!r}.")
     tol = check_positive("tolerance_px", tolerance_px, owner="ipr", unit="px")
+    if calibration_error_px is not None and not float(calibration_error_px) < tol:
+        raise ConfigError(f"ipr: the calibration's reprojection error {calibration_error_px!r} px reaches the triangulation "
+                          f"tolerance tolerance_px={tol} px; true particles would not triangulate. Recalibrate "
+                          f"(volume self-calibration) or raise 'tolerance_px' above the calibration error.")
     thr = threshold if threshold is not None else [auto_threshold(i) for i in imgs]
     thr = list(np.broadcast_to(np.asarray(thr, dtype=np.float64), (len(imgs),)))
     scale = mm_per_px(cameras, 0.5 * (lo + hi))
     step_mm = check_positive("shake_step_px", shake_step_px, owner="ipr", unit="px") * scale
     dup_mm = check_positive("duplicate_px", duplicate_px, owner="ipr", unit="px") * scale
+    n = len(cameras)
+    blank = [k for k in range(n) if detect_peaks(imgs[k], threshold=thr[k])[0].shape[0] == 0]
+    if blank and initial is None:
+        # a camera that sees no particle in this frame carries no information: leave it out
+        live = [k for k in range(n) if k not in blank]
+        log.debug("ipr: cameras %s show no peak above the threshold; reconstructing with %s", blank, live)
+        if len(live) < 2:
+            return IPRResult(np.zeros((0, 3)), np.zeros(0), [i.copy() for i in imgs],
+                             [{"cameras": live, "peaks": [0] * n, "candidates": 0, "particles": 0}])
+        sub = OTF(otf.lower_mm, otf.upper_mm, otf.a[live], otf.b[live], otf.c[live], otf.peak[live])
+        r = ipr([imgs[k] for k in live], [cameras[k] for k in live], sub, lower_mm=lo, upper_mm=hi,
+                threshold=[thr[k] for k in live], tolerance_px=tol, outer_loops=outer_loops, reduced_loops=reduced_loops,
+                shake_iterations=shake_iterations, shake_step_px=shake_step_px, final_iterations=final_iterations,
+                min_intensity=min_intensity, duplicate_px=duplicate_px, progress=progress)
+        res = [imgs[k].copy() for k in range(n)]
+        for j, k in enumerate(live):
+            res[k] = r.residuals[j]
+        return IPRResult(r.positions_mm, r.intensities, res, [dict(h, cameras=[live[c] for c in h["cameras"]]) for h in r.history])
     if initial is not None:
         p = np.asarray(initial[0], dtype=np.float64).reshape(-1, 3)
         e = np.array(np.broadcast_to(np.asarray(initial[1], dtype=np.float64), (p.shape[0],)))
     else:
         p, e = np.zeros((0, 3)), np.zeros(0)
     res = [i - pr for i, pr in zip(imgs, project_particles(p, e, cameras, otf), strict=True)] if p.size else [i.copy() for i in imgs]
-    n = len(cameras)
     sets = [list(range(n))] * int(outer_loops)
     if n >= 3:
         subsets = [list(s) for s in combinations(range(n), n - 1)]
@@ -511,12 +544,18 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
         for use in sets:
             peaks = [detect_peaks(r, threshold=t) for r, t in zip(res, thr, strict=True)]
             x, ids, _ = triangulate([q[0] for q in peaks], cameras, tolerance_px=tol, lower_mm=lo, upper_mm=hi, use=use)
+            n_cand = int(x.shape[0])
+            n_min = min(q[0].shape[0] for q in peaks)
+            if not history and p.shape[0] == 0 and initial is None and n_min >= 20 and n_cand < 0.05 * n_min:
+                raise ConfigError(
+                    f"ipr: {[int(q[0].shape[0]) for q in peaks]} peaks in the cameras but only {n_cand} triangulate "
+                    f"within tolerance_px={tol} px: the calibration does not fit the images (reprojection error above "
+                    f"the tolerance?). Check the cameras, recalibrate, or raise 'tolerance_px'.")
             if x.shape[0]:
                 vals = np.stack([peaks[k][1][ids[:, k]] / pk_otf[k] for k in use], axis=1)
                 e_new = vals.mean(axis=1)
                 p = np.concatenate([p, x])
                 e = np.concatenate([e, e_new])
-            n_cand = int(x.shape[0])
             if p.shape[0]:
                 p, e, res = shake(imgs, cameras, otf, p, e, step_mm=step_mm, iterations=shake_iterations)
                 p, e = _prune(p, e, lo, hi, min_intensity, dup_mm)
