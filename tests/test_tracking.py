@@ -151,7 +151,11 @@ def test_stb_uniform_translation_velocity_within_1_percent():
     assert m["correct_track_fraction"] >= 0.95, m
     inside = np.all((traj >= LO) & (traj <= HI), axis=2)
     entered = np.flatnonzero(~inside[:, 0] & inside[:, -1])
-    assert entered.size > 0  # the set-up has particles entering the box ...
+    assert entered.size > 5  # the set-up has particles entering the box ...
+    q, _ = tr.frame(N_FRAMES - 1)
+    got = particle_metrics(q, traj[entered, -1], radius_mm=0.08)
+    assert got["n_matched"] == entered.size  # ... and tracks them once inside
+    assert np.all((q >= BOX_LO) & (q <= BOX_HI))  # nothing tracked outside the box
     assert np.all(np.isfinite(tr.positions_mm[tr.present])) and np.all(np.isfinite(tr.velocities_mm_s[tr.present]))
 
 

@@ -26,7 +26,9 @@ Steps
    after another with the residual updated in between (:func:`colour_groups`).
 4. :func:`ipr`: outer loops of detection on the residual images, triangulation (all
    cameras first, then every set with one camera left out), shaking and removal of weak
-   particles (intensity below ``min_intensity`` times the median) and duplicates.
+   particles (intensity below ``min_intensity`` times the median) and duplicates. A
+   candidate from a reduced set must be hidden in the left-out camera (its raw image is
+   above the threshold there) or fall off that camera's sensor; else it is a ghost.
 
 Memory and time are linear in the particle count: KD-trees and sparse neighbour lists
 (SciPy) do the searches, chunks of particles bound the stamp arrays. Hand-written because
@@ -455,7 +457,7 @@ def _prune(p, e, lo, hi, min_intensity, dup_mm):
 def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolerance_px: float = 1.0,
         outer_loops: int = 2, reduced_loops: int = 1, shake_iterations: int = 3, shake_step_px: float = 0.5,
         final_iterations: int = 8, min_intensity: float = 0.1, duplicate_px: float = 1.0, initial=None,
-        calibration_error_px: float | None = None, progress=None) -> IPRResult:
+        reduced_tolerance: float = 0.5, calibration_error_px: float | None = None, progress=None) -> IPRResult:
     """Iterative particle reconstruction of one frame (Wieneke 2013).
 
     Parameters
@@ -476,6 +478,9 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
     min_intensity : particles below this fraction of the median intensity are removed.
     duplicate_px : particles closer than this [px, object-space equivalent] merge.
     initial : optional ``(positions_mm, intensities)`` to start from (STB's predictions).
+    reduced_tolerance : the reduced sets triangulate with this fraction of ``tolerance_px``
+        (a set with one camera fewer admits many more ghosts: their number grows with the
+        tolerance cubed for four cameras, squared for three).
     calibration_error_px : the calibration's reprojection error [px], when known; it must
         be below ``tolerance_px`` (else :class:`ConfigError`).
     progress : see :mod:`mitpiv.progress`.
@@ -505,6 +510,7 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
         raise ConfigError(f"ipr: the calibration's reprojection error {calibration_error_px!r} px reaches the triangulation "
                           f"tolerance tolerance_px={tol} px; true particles would not triangulate. Recalibrate "
                           f"(volume self-calibration) or raise 'tolerance_px' above the calibration error.")
+    reduced_tol = tol * check_positive("reduced_tolerance", reduced_tolerance, owner="ipr")
     thr = threshold if threshold is not None else [auto_threshold(i) for i in imgs]
     thr = list(np.broadcast_to(np.asarray(thr, dtype=np.float64), (len(imgs),)))
     scale = mm_per_px(cameras, 0.5 * (lo + hi))
@@ -523,7 +529,8 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
         r = ipr([imgs[k] for k in live], [cameras[k] for k in live], sub, lower_mm=lo, upper_mm=hi,
                 threshold=[thr[k] for k in live], tolerance_px=tol, outer_loops=outer_loops, reduced_loops=reduced_loops,
                 shake_iterations=shake_iterations, shake_step_px=shake_step_px, final_iterations=final_iterations,
-                min_intensity=min_intensity, duplicate_px=duplicate_px, progress=progress)
+                min_intensity=min_intensity, duplicate_px=duplicate_px, reduced_tolerance=reduced_tolerance,
+                progress=progress)
         res = [imgs[k].copy() for k in range(n)]
         for j, k in enumerate(live):
             res[k] = r.residuals[j]
@@ -543,7 +550,20 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
     with bar(len(sets), desc="IPR", progress=progress) as pb:
         for use in sets:
             peaks = [detect_peaks(r, threshold=t) for r, t in zip(res, thr, strict=True)]
-            x, ids, _ = triangulate([q[0] for q in peaks], cameras, tolerance_px=tol, lower_mm=lo, upper_mm=hi, use=use)
+            x, ids, _ = triangulate([q[0] for q in peaks], cameras, tolerance_px=tol if len(use) == n else reduced_tol,
+                                    lower_mm=lo, upper_mm=hi, use=use)
+            if x.shape[0] and len(use) < n:
+                # a particle missed by one camera must be hidden there (behind another
+                # particle's light in the raw image) or off its sensor: else it is a ghost
+                ok = np.ones(x.shape[0], bool)
+                for k in set(range(n)) - set(use):
+                    uv = cameras[k].project(x)
+                    on = cameras[k].visible(x)
+                    hk, wk = imgs[k].shape
+                    col = np.clip(np.nan_to_num(uv[:, 0]).astype(np.int64), 0, wk - 1)
+                    row = np.clip(np.nan_to_num(uv[:, 1]).astype(np.int64), 0, hk - 1)
+                    ok &= ~on | (imgs[k][row, col] > thr[k])
+                x, ids = x[ok], ids[ok]
             n_cand = int(x.shape[0])
             n_min = min(q[0].shape[0] for q in peaks)
             if not history and p.shape[0] == 0 and initial is None and n_min >= 20 and n_cand < 0.05 * n_min:
