@@ -111,7 +111,7 @@ def test_ipr_sparse_set_finds_99_percent_within_0p05_px():
     p = particles(0.005)
     otf = OTF.uniform(4, sigma_px=1.0, lower_mm=LO, upper_mm=HI)
     imgs = project_particles(p, 1.0, cams, otf)
-    r = ipr(imgs, cams, otf, lower_mm=LO - 0.5, upper_mm=HI + 0.5, threshold=0.1)
+    r = ipr(imgs, cams, otf, lower_mm=LO - 0.5, upper_mm=HI + 0.5, threshold=0.1, outer_loops=2)  # 2 suffice here
     pairs = assign(r.positions_mm, p, 0.08)  # 1 px in object space
     err = projected_error_px(cams, r.positions_mm[pairs[:, 0]], p[pairs[:, 1]])
     good = np.count_nonzero(err <= IPR_ERROR_PX)
@@ -128,6 +128,9 @@ N_FRAMES, DT_S = 8, 1e-3
 BOX_LO, BOX_HI = LO - [2.5, 0.5, 0.5], HI + [2.5, 0.5, 0.5]  # reconstruction box: every particle's path
 
 
+FAST = {"outer_loops": 2}  # IPR loops enough at these densities (keeps the tests fast)
+
+
 def sequence(traj, cams, otf):
     return [project_particles(traj[:, f], 1.0, cams, otf) for f in range(traj.shape[1])]
 
@@ -140,7 +143,8 @@ def test_stb_uniform_translation_velocity_within_1_percent():
     p0 = rng.uniform(LO - [2.0, 0, 0], HI, (160, 3))
     u = np.array([240.0, 60.0, -30.0])  # [mm/s]: 0.25 mm = 3.1 px per frame
     traj = p0[:, None] + u * DT_S * np.arange(N_FRAMES)[None, :, None]
-    tr = stb(sequence(traj, cams, otf), cams, otf, dt_s=DT_S, lower_mm=BOX_LO, upper_mm=BOX_HI, threshold=0.1)
+    tr = stb(sequence(traj, cams, otf), cams, otf, dt_s=DT_S, lower_mm=BOX_LO, upper_mm=BOX_HI, threshold=0.1,
+             ipr_options=FAST)
     vel = np.broadcast_to(u, traj.shape)
     m = track_metrics(tr, traj, radius_mm=0.08, truth_velocities_mm_s=vel, truth_accelerations_mm_s2=np.zeros_like(traj),
                       lower_mm=LO, upper_mm=HI, cameras=cams)
@@ -171,7 +175,8 @@ def test_stb_solid_body_rotation_velocity_1_and_acceleration_5_percent():
     traj = np.stack([r[:, None] * np.cos(th), r[:, None] * np.sin(th), np.broadcast_to(z[:, None], th.shape)], axis=-1)
     vel = np.stack([-w * traj[..., 1], w * traj[..., 0], np.zeros(th.shape)], axis=-1)
     acc = np.stack([-w**2 * traj[..., 0], -w**2 * traj[..., 1], np.zeros(th.shape)], axis=-1)
-    tr = stb(sequence(traj, cams, otf), cams, otf, dt_s=DT_S, lower_mm=BOX_LO, upper_mm=BOX_HI, threshold=0.1)
+    tr = stb(sequence(traj, cams, otf), cams, otf, dt_s=DT_S, lower_mm=BOX_LO, upper_mm=BOX_HI, threshold=0.1,
+             ipr_options=FAST)
     m = track_metrics(tr, traj, radius_mm=0.08, truth_velocities_mm_s=vel, truth_accelerations_mm_s2=acc, cameras=cams)
     assert m["yield"] >= 0.95 and m["ghost_fraction"] <= 0.02, m
     assert m["velocity_error_rel"] <= STB_VELOCITY_REL, m

@@ -455,7 +455,7 @@ def _prune(p, e, lo, hi, min_intensity, dup_mm):
 
 
 def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolerance_px: float = 1.0,
-        outer_loops: int = 2, reduced_loops: int = 1, shake_iterations: int = 3, shake_step_px: float = 0.5,
+        outer_loops: int = 4, reduced_loops: int = 1, shake_iterations: int = 3, shake_step_px: float = 0.5,
         final_iterations: int = 8, min_intensity: float = 0.1, duplicate_px: float = 1.0, initial=None,
         reduced_tolerance: float = 0.5, calibration_error_px: float | None = None, progress=None) -> IPRResult:
     """Iterative particle reconstruction of one frame (Wieneke 2013).
