@@ -90,8 +90,10 @@ def test_layers():
     assert not edges.get("physics", set()) & {"render", "io", "reconstruct", "analysis", "lightfield", "studies"}
     assert not edges.get("io", set()) & {"render", "reconstruct", "analysis", "lightfield", "studies", "imaging"}
     assert not edges.get("render", set()) & {"reconstruct", "analysis", "studies"}
-    for pkg in ("reconstruct", "analysis", "lightfield", "holography"):
+    for pkg in ("reconstruct", "analysis", "lightfield", "holography", "tracking"):
         assert not edges.get(pkg, set()) & {"render", "studies"}, pkg
+    # tracking is a peer of reconstruct: physics, io, grid, analysis below it
+    assert not edges.get("tracking", set()) & {"reconstruct", "lightfield", "holography", "imaging"}
     for pkg, dst in edges.items():
         if pkg not in TOP | {"studies"}:
             assert "studies" not in dst, pkg

@@ -1,0 +1,592 @@
+"""Iterative particle reconstruction (IPR, Wieneke 2013): 2D peaks, triangulation across
+cameras, shaking against the residual images with the OTF, ghost removal, outer loops
+with reduced camera sets.
+
+Steps
+-----
+1. :func:`detect_peaks`: local maxima (3 x 3) above a threshold, sub-pixel position by a
+   3-point Gaussian fit per axis (:func:`mitpiv.analysis.particles.gauss3_offset`).
+2. :func:`triangulate`: for each peak of the first camera of a set, its line of sight
+   (``pixel_to_ray``) is clipped to the measurement box and sampled in 3D; the samples
+   project onto the epipolar curve in the second camera, and peaks there within
+   ``tolerance_px`` (plus half a sample step) pair up. Each pair gives a 3D candidate,
+   which is projected into the other cameras to collect their peaks within the tolerance
+   (every combination is kept); the final position minimises the reprojection error by
+   Gauss-Newton on ``project`` / ``jacobian`` and candidates whose largest reprojection
+   error exceeds ``tolerance_px`` are dropped. Distortion is handled through the camera's
+   own ``project``; only the first guess uses the rays.
+3. :func:`shake`: each particle's position and intensity are moved to reduce the squared
+   difference between its augmented residual (``I - the images of all other particles``)
+   and its own image, summed over its stamp in every camera. Wieneke shakes each
+   coordinate by ``-s, 0, +s`` and fits a parabola; here one damped Gauss-Newton step per
+   iteration does the same job with the analytic derivatives of the OTF and of the
+   camera (``jacobian``), each coordinate step limited to the shake amplitude ``s``
+   (ten times fewer image evaluations, the same minimum). Particles whose images do not overlap move
+   together (vectorised); overlapping ones are in different groups, shaken one group
+   after another with the residual updated in between (:func:`colour_groups`).
+4. :func:`ipr`: outer loops of detection on the residual images, triangulation (all
+   cameras first, then every set with one camera left out), shaking and removal of weak
+   particles (intensity below ``min_intensity`` times the median) and duplicates. A
+   candidate from a reduced set must be hidden in the left-out camera (its raw image is
+   above the threshold there) or fall off that camera's sensor; else it is a ghost.
+
+Memory and time are linear in the particle count: KD-trees and sparse neighbour lists
+(SciPy) do the searches, chunks of particles bound the stamp arrays. Hand-written because
+no kept Python library offers IPR; the projector is :mod:`mitpiv.tracking.otf`.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from itertools import combinations
+
+import numpy as np
+
+from mitpiv.analysis.particles import gauss3_offset
+from mitpiv.errors import ConfigError, check_positive
+from mitpiv.progress import bar
+from mitpiv.tracking.otf import OTF, project_particles, stamps
+
+__all__ = ["IPRResult", "detect_peaks", "triangulate", "shake", "ipr", "auto_threshold", "mm_per_px", "colour_groups"]
+
+log = logging.getLogger(__name__)
+
+
+# ---------------------------------------------------------------------- checks
+def _check_images(images, cameras, what):
+    if len(images) != len(cameras) or len(cameras) < 2:
+        raise ConfigError(f"{what}: need one image per camera and at least 2 cameras, got {len(images)} images "
+                          f"for {len(cameras)} cameras.")
+    out = []
+    for k, (img, cam) in enumerate(zip(images, cameras, strict=True)):
+        a = np.asarray(img, dtype=np.float64)
+        w, h = cam.resolution
+        if a.shape != (h, w):
+            raise ConfigError(f"{what}: image {k} has shape {a.shape}, camera {k} expects (H, W) = {(h, w)}.")
+        if not np.all(np.isfinite(a)):
+            raise ConfigError(f"{what}: image {k} holds NaN or infinite pixels; clean it (np.nan_to_num) first.")
+        out.append(a)
+    return out
+
+
+def _check_rays(cameras, what):
+    for k, cam in enumerate(cameras):
+        if not hasattr(cam, "pixel_to_ray"):
+            raise ConfigError(f"{what}: camera {k} ({type(cam).__name__}) has no back-projection 'pixel_to_ray'; "
+                              f"triangulation works with pinhole cameras (mitpiv.physics.camera.PinholeCamera) for now.")
+
+
+def mm_per_px(cameras, point_mm) -> float:
+    """Mean object-space size of a pixel [mm/px] at ``point_mm`` over the cameras (from
+    the camera Jacobians: the inverse of the RMS singular value)."""
+    p = np.asarray(point_mm, dtype=np.float64).reshape(1, 3)
+    s = [np.linalg.svd(cam.jacobian(p)[0], compute_uv=False) for cam in cameras]
+    return float(1.0 / np.sqrt(np.mean(np.square(s))))
+
+
+# ---------------------------------------------------------------------- peaks
+def auto_threshold(image) -> float:
+    """A detection threshold for ``image``: the larger of 5 robust noise standard
+    deviations (median absolute deviation of the pixels around the median) and 5 % of the
+    99.9th percentile (the particle peaks)."""
+    a = np.asarray(image, dtype=np.float64)
+    med = np.median(a)
+    sigma = 1.4826 * np.median(np.abs(a - med))
+    hi = np.percentile(a, 99.9)
+    return float(max(med + 5 * sigma, 0.05 * hi, np.finfo(float).tiny))
+
+
+def detect_peaks(image, *, threshold: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Local maxima (3 x 3 neighbourhood) above ``threshold`` with sub-pixel positions.
+
+    Returns
+    -------
+    uv_px : (M, 2) peak positions [px] (pixel centres at ``i + 0.5``); offsets by a
+        3-point Gaussian fit along each axis (0 at the image border).
+    values : (M,) pixel values at the maxima.
+    """
+    from scipy.ndimage import maximum_filter
+
+    a = np.asarray(image, dtype=np.float64)
+    thr = auto_threshold(a) if threshold is None else float(threshold)
+    if not np.isfinite(thr):
+        raise ConfigError(f"detect_peaks: 'threshold' must be finite, got {threshold!r}.")
+    mx = maximum_filter(a, size=3, mode="constant", cval=-np.inf)
+    rows, cols = np.nonzero((a >= mx) & (a > thr))
+    h, w = a.shape
+    pad = np.pad(a, 1, mode="constant", constant_values=0.0)
+    c = a[rows, cols]
+    du = gauss3_offset(pad[rows + 1, cols], c, pad[rows + 1, cols + 2])
+    dv = gauss3_offset(pad[rows, cols + 1], c, pad[rows + 2, cols + 1])
+    du = np.where((cols == 0) | (cols == w - 1), 0.0, du)
+    dv = np.where((rows == 0) | (rows == h - 1), 0.0, dv)
+    return np.stack([cols + 0.5 + du, rows + 0.5 + dv], axis=1), c
+
+
+# ---------------------------------------------------------------------- triangulation
+def _clip_rays(o, d, lo, hi):
+    """Ray parameters (t0, t1) where rays o + t d cross the box (slab method); NaN if not."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d
+        ta = (lo - o) * inv
+        tb = (hi - o) * inv
+    tmin = np.nanmax(np.minimum(ta, tb), axis=-1)
+    tmax = np.nanmin(np.maximum(ta, tb), axis=-1)
+    tmin = np.maximum(tmin, 0.0)
+    bad = ~(tmax > tmin)
+    return np.where(bad, np.nan, tmin), np.where(bad, np.nan, tmax)
+
+
+def _ls_rays(origins, dirs, mask):
+    """Least-squares intersection of rays: origins (K, C, 3), dirs (K, C, 3), mask (K, C)."""
+    m = mask[..., None, None].astype(np.float64)
+    proj = np.eye(3) - dirs[..., :, None] * dirs[..., None, :]
+    a = (m * proj).sum(axis=1)
+    b = (m * proj @ origins[..., None]).sum(axis=1)[..., 0]
+    a = a + 1e-12 * np.eye(3)
+    return np.linalg.solve(a, b[..., None])[..., 0]
+
+
+def _refine(points, cams_uv, mask, cameras, iterations=3):
+    """Gauss-Newton on the reprojection error; returns points and the per-camera errors [px]."""
+    x = points.copy()
+    for _ in range(iterations):
+        jtj = np.zeros((x.shape[0], 3, 3)) + 1e-12 * np.eye(3)
+        jtr = np.zeros((x.shape[0], 3))
+        for k, cam in enumerate(cameras):
+            mk = mask[:, k]
+            if not mk.any():
+                continue
+            r = cams_uv[mk, k] - cam.project(x[mk])
+            jac = cam.jacobian(x[mk])
+            jtj[mk] += np.einsum("nij,nik->njk", jac, jac)
+            jtr[mk] += np.einsum("nij,ni->nj", jac, r)
+        x = x + np.linalg.solve(jtj, jtr[..., None])[..., 0]
+    err = np.full(mask.shape, np.nan)
+    for k, cam in enumerate(cameras):
+        mk = mask[:, k]
+        if mk.any():
+            err[mk, k] = np.linalg.norm(cams_uv[mk, k] - cam.project(x[mk]), axis=1)
+    return x, err
+
+
+def triangulate(peaks, cameras, *, tolerance_px: float, lower_mm, upper_mm, use=None,
+                max_candidates: int = 5_000_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """3D candidates from 2D peaks by epipolar search across cameras.
+
+    Parameters
+    ----------
+    peaks : sequence of (M_c, 2) peak positions [px], one per camera.
+    cameras : sequence of cameras with ``project``, ``jacobian`` and ``pixel_to_ray``.
+    tolerance_px : allowed triangulation (reprojection) error [px].
+    lower_mm, upper_mm : measurement box [mm]; candidates outside are dropped.
+    use : indices of the cameras to combine (at least 2); default all.
+    max_candidates : bound on intermediate candidate pairs (a :class:`ConfigError` beyond).
+
+    Returns
+    -------
+    positions_mm : (K, 3); peak_index : (K, n_cameras) index of the peak used in each
+    camera (-1 where a camera is not used); error_px : (K,) largest reprojection error.
+    """
+    from scipy.spatial import cKDTree
+
+    tol = check_positive("tolerance_px", tolerance_px, owner="triangulate", unit="px")
+    lo = np.asarray(lower_mm, dtype=np.float64)
+    hi = np.asarray(upper_mm, dtype=np.float64)
+    n_cam = len(cameras)
+    use = list(range(n_cam)) if use is None else [int(u) for u in use]
+    if len(use) < 2 or len(set(use)) != len(use) or min(use) < 0 or max(use) >= n_cam:
+        raise ConfigError(f"triangulate: 'use' must name at least 2 distinct cameras among 0..{n_cam - 1}, got {use!r}.")
+    _check_rays([cameras[k] for k in use], "triangulate")
+    pk = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in peaks]
+    empty = (np.zeros((0, 3)), np.zeros((0, n_cam), np.int64), np.zeros(0))
+    if any(pk[k].shape[0] == 0 for k in use):
+        return empty
+    c0, c1 = use[0], use[1]
+    # line of sight of each peak of c0, clipped to the box and sampled in 3D
+    o0, d0 = cameras[c0].pixel_to_ray(pk[c0])
+    o0 = np.broadcast_to(o0, d0.shape)
+    t0, t1 = _clip_rays(o0, d0, lo, hi)
+    ok = np.isfinite(t0)
+    idx0 = np.flatnonzero(ok)
+    if idx0.size == 0:
+        return empty
+    a = o0[ok] + t0[ok, None] * d0[ok]
+    b = o0[ok] + t1[ok, None] * d0[ok]
+    ua, ub = cameras[c1].project(a), cameras[c1].project(b)
+    length = np.linalg.norm(ub - ua, axis=1)
+    step = tol
+    ns = np.maximum(2, np.ceil(np.nan_to_num(length, nan=0.0) / step).astype(np.int64) + 1)
+    if ns.sum() > max_candidates:
+        raise ConfigError(f"triangulate: {int(ns.sum())} epipolar samples exceed max_candidates={max_candidates}; "
+                          f"reduce the box or the peak count, or raise 'max_candidates'.")
+    ray = np.repeat(np.arange(idx0.size), ns)
+    first = np.repeat(np.cumsum(ns) - ns, ns)
+    frac = (np.arange(ns.sum()) - first) / (ns[ray] - 1)
+    pts = a[ray] + frac[:, None] * (b[ray] - a[ray])
+    uv = cameras[c1].project(pts)
+    okp = np.all(np.isfinite(uv), axis=1) & cameras[c1].in_front(pts)
+    tree1 = cKDTree(pk[c1])
+    sm = cKDTree(uv[okp]).sparse_distance_matrix(tree1, np.hypot(tol, step), output_type="coo_matrix")
+    pair_ray = ray[okp][sm.row]
+    key = np.unique(pair_ray.astype(np.int64) * pk[c1].shape[0] + sm.col)
+    i0 = idx0[key // pk[c1].shape[0]]
+    i1 = key % pk[c1].shape[0]
+    if i0.size > max_candidates:
+        raise ConfigError(f"triangulate: {i0.size} candidate pairs exceed max_candidates={max_candidates}; "
+                          f"lower 'tolerance_px' or the particle density.")
+    ids = np.full((i0.size, n_cam), -1, np.int64)
+    ids[:, c0], ids[:, c1] = i0, i1
+    rays_o = np.zeros((i0.size, n_cam, 3))
+    rays_d = np.zeros((i0.size, n_cam, 3))
+
+    def set_rays(rows, k):
+        o, d = cameras[k].pixel_to_ray(pk[k][ids[rows, k]])
+        rays_o[rows, k], rays_d[rows, k] = o, d
+
+    set_rays(np.arange(i0.size), c0)
+    set_rays(np.arange(i0.size), c1)
+    x = _ls_rays(rays_o, rays_d, ids >= 0)
+    for k in use[2:]:
+        if ids.shape[0] == 0:
+            return empty
+        front = cameras[k].in_front(x)
+        uvk = cameras[k].project(x)
+        good = front & np.all(np.isfinite(uvk), axis=1)
+        rows_g = np.flatnonzero(good)
+        smk = cKDTree(uvk[good]).sparse_distance_matrix(cKDTree(pk[k]), tol * 1.5, output_type="coo_matrix")
+        rows = rows_g[smk.row]
+        if rows.size > max_candidates:
+            raise ConfigError(f"triangulate: {rows.size} candidates exceed max_candidates={max_candidates}; "
+                              f"lower 'tolerance_px' or the particle density.")
+        ids = ids[rows]
+        ids[:, k] = smk.col
+        rays_o, rays_d = rays_o[rows], rays_d[rows]
+        set_rays(np.arange(ids.shape[0]), k)
+        x = _ls_rays(rays_o, rays_d, ids >= 0)
+    if ids.shape[0] == 0:
+        return empty
+    mask = ids >= 0
+    cams_uv = np.zeros((ids.shape[0], n_cam, 2))
+    for k in use:
+        cams_uv[:, k] = pk[k][ids[:, k]]
+    x, err = _refine(x, cams_uv, mask, cameras)
+    emax = np.nanmax(err, axis=1)
+    keep = (emax <= tol) & np.all((x >= lo) & (x <= hi), axis=1)
+    return x[keep], ids[keep], emax[keep]
+
+
+# ---------------------------------------------------------------------- shaking
+def _windows(res, cam, otf, k, p, e, r):
+    """Per-particle window of camera k: cols, rows, in-image mask, augmented residual."""
+    w, h = cam.resolution
+    uv = cam.project(p)
+    vis = cam.in_front(p) & np.all(np.isfinite(uv), axis=1)
+    uv = np.where(vis[:, None], uv, -10.0 * r)
+    a, b, c, pk = otf.params(k, p)
+    cols, rows, own = stamps(uv, a, b, c, pk * e, r)
+    inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h) & vis[:, None, None]
+    aug = np.where(inside, res[np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)] + own, 0.0)
+    return cols, rows, inside, aug, (a, b, c, pk)
+
+
+def _stamp_on(cam, p, cols, rows, inside, params):
+    """Unit-intensity particle image at positions p sampled on given windows (the OTF
+    parameters of the window's particle, which vary slowly with position)."""
+    uv = cam.project(p)
+    a, b, c, pk = params
+    du = cols + 0.5 - uv[:, 0, None, None]
+    dv = rows + 0.5 - uv[:, 1, None, None]
+    q = a[:, None, None] * du * du + 2 * b[:, None, None] * du * dv + c[:, None, None] * dv * dv
+    return np.where(inside, pk[:, None, None] * np.exp(-0.5 * q), 0.0)
+
+
+def colour_groups(positions_mm, cameras, radius_px: float, *, seed: int = 0) -> list[np.ndarray]:
+    """Split particles into groups whose images do not overlap in any camera (projections
+    at least ``radius_px`` apart): a vectorised Jones-Plassmann colouring with random
+    priorities. Returns index arrays, one per group."""
+    from scipy.spatial import cKDTree
+
+    n = positions_mm.shape[0]
+    if n == 0:
+        return []
+    edges = [np.zeros((0, 2), np.int64)]
+    for cam in cameras:
+        uv = cam.project(positions_mm)
+        ok = np.flatnonzero(np.all(np.isfinite(uv), axis=1))
+        if ok.size > 1:
+            pr = cKDTree(uv[ok]).query_pairs(radius_px, output_type="ndarray")
+            edges.append(ok[pr])
+    e = np.concatenate(edges)
+    e = np.concatenate([e, e[:, ::-1]])
+    prio = np.random.default_rng(seed).permutation(n)
+    colour = np.full(n, -1)
+    c = 0
+    while np.any(colour < 0):
+        open_ = colour < 0
+        live = open_[e[:, 0]] & open_[e[:, 1]]
+        beaten = np.zeros(n, bool)
+        el = e[live]
+        beaten[el[prio[el[:, 1]] > prio[el[:, 0]], 0]] = True
+        colour[open_ & ~beaten] = c
+        c += 1
+    order = np.argsort(colour, kind="stable")
+    return np.split(order, np.flatnonzero(np.diff(colour[order])) + 1)
+
+
+def _shake_group(res, cameras, otf, pc, ec, s, r, fixed_intensity):
+    """One damped Gauss-Newton step of position (and intensity) per particle against its
+    augmented residual in every camera, each coordinate step limited to +-s [mm]; the
+    residual images ``res`` are updated in place on the particles' windows."""
+    wins = [_windows(res[k], cam, otf, k, pc, ec, r) for k, cam in enumerate(cameras)]
+    own_old = [w[3] - np.where(w[2], res[k][np.clip(w[1], 0, res[k].shape[0] - 1), np.clip(w[0], 0, res[k].shape[1] - 1)], 0.0)
+               for k, w in enumerate(wins)]
+    m = 3 if fixed_intensity else 4
+    jtj = np.zeros((pc.shape[0], m, m))
+    jtr = np.zeros((pc.shape[0], m))
+    for k, cam in enumerate(cameras):
+        cols, rows, inside, aug, (a, b, c, pk) = wins[k]
+        uv = cam.project(pc)
+        jac = cam.jacobian(pc)
+        du = cols + 0.5 - uv[:, 0, None, None]
+        dv = rows + 0.5 - uv[:, 1, None, None]
+        q = a[:, None, None] * du * du + 2 * b[:, None, None] * du * dv + c[:, None, None] * dv * dv
+        g = np.where(inside, pk[:, None, None] * np.exp(-0.5 * q), 0.0)
+        eg = ec[:, None, None] * g
+        gu = eg * (a[:, None, None] * du + b[:, None, None] * dv)
+        gv = eg * (b[:, None, None] * du + c[:, None, None] * dv)
+        cols_j = [gu * jac[:, 0, i, None, None] + gv * jac[:, 1, i, None, None] for i in range(3)]
+        if not fixed_intensity:
+            cols_j.append(g)
+        dm = np.stack([x.reshape(x.shape[0], -1) for x in cols_j], axis=2)  # (N, P, m)
+        rr = (aug - eg).reshape(pc.shape[0], -1)
+        jtj += np.einsum("npi,npj->nij", dm, dm)
+        jtr += np.einsum("npi,np->ni", dm, rr)
+    diag = np.einsum("nii->ni", jtj)
+    damp = jtj + (1e-3 * diag + 1e-12)[:, :, None] * np.eye(m)
+    step = np.linalg.solve(damp, jtr[..., None])[..., 0]
+    step = np.nan_to_num(step)
+    pn = pc + np.clip(step[:, :3], -s, s)
+    en = ec if fixed_intensity else np.maximum(ec + step[:, 3], 0.0)
+    # residual update on the same windows: old image back in, new image out
+    for k, cam in enumerate(cameras):
+        cols, rows, inside, aug, prm = wins[k]
+        new = en[:, None, None] * _stamp_on(cam, pn, cols, rows, inside, prm)
+        np.add.at(res[k], (rows[inside], cols[inside]), (own_old[k] - new)[inside])
+    return pn, en
+
+
+def shake(images, cameras, otf: OTF, positions_mm, intensities, *, step_mm: float, iterations: int = 6,
+          chunk: int = 20_000, fixed_intensity: bool = False) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Shake particles against the residual images (see the module notes).
+
+    Particles whose images overlap are never moved together: they are split into groups
+    of non-overlapping particles (:func:`colour_groups`), each group is shaken at once
+    (vectorised) and the residual images are updated before the next group, so two
+    overlapping particles share their light as in a sequential (Gauss-Seidel) shake.
+
+    Parameters
+    ----------
+    images : per-camera (H, W) images; cameras : the cameras; otf : the particle image model.
+    positions_mm : (N, 3) start positions [mm]; intensities : (N,) start intensities.
+    step_mm : first shake amplitude (largest step per coordinate) [mm]; it shrinks by 0.6
+        per iteration (floor 5 %).
+    iterations : shake iterations.
+    chunk : particles per vectorised batch (bounds memory).
+    fixed_intensity : keep the intensities (only move).
+
+    Returns
+    -------
+    positions_mm (N, 3), intensities (N,) (>= 0), residual images (list of (H, W)).
+    """
+    imgs = [np.asarray(i, dtype=np.float64) for i in images]
+    p = np.array(positions_mm, dtype=np.float64).reshape(-1, 3)
+    e = np.array(np.broadcast_to(np.asarray(intensities, dtype=np.float64), (p.shape[0],)))
+    s0 = check_positive("step_mm", step_mm, owner="shake", unit="mm")
+    r = otf.radius_px()
+    res = [img - pr for img, pr in zip(imgs, project_particles(p, e, cameras, otf), strict=True)]
+    for it in range(int(iterations)):
+        s = s0 * max(0.6**it, 0.05)
+        for group in colour_groups(p, cameras, r + 1, seed=it):
+            for lo_i in range(0, group.size, chunk):
+                g = group[lo_i:lo_i + chunk]
+                pn, en = _shake_group(res, cameras, otf, p[g], e[g], s, r, fixed_intensity)
+                p[g], e[g] = pn, en
+    res = [img - pr for img, pr in zip(imgs, project_particles(p, e, cameras, otf), strict=True)]
+    return p, e, res
+
+
+# ---------------------------------------------------------------------- IPR
+@dataclass
+class IPRResult:
+    """Particles reconstructed by :func:`ipr`.
+
+    positions_mm : (N, 3); intensities : (N,); residuals : per-camera residual images;
+    history : per outer loop, a dict (cameras used, peaks, candidates, particles kept).
+    """
+
+    positions_mm: np.ndarray
+    intensities: np.ndarray
+    residuals: list = field(repr=False)
+    history: list = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return int(self.positions_mm.shape[0])
+
+
+def _prune(p, e, lo, hi, min_intensity, dup_mm):
+    """Drop weak particles, particles outside the box, and the dimmer of close pairs."""
+    from scipy.spatial import cKDTree
+
+    if p.shape[0] == 0:
+        return p, e
+    ref = np.median(e[e > 0]) if np.any(e > 0) else 0.0
+    keep = (e > min_intensity * ref) & np.all((p >= lo) & (p <= hi), axis=1) & np.all(np.isfinite(p), axis=1)
+    p, e = p[keep], e[keep]
+    if p.shape[0] > 1:
+        pairs = cKDTree(p).query_pairs(dup_mm, output_type="ndarray")
+        if pairs.size:
+            drop = np.where(e[pairs[:, 0]] >= e[pairs[:, 1]], pairs[:, 1], pairs[:, 0])
+            keep = np.ones(p.shape[0], bool)
+            keep[drop] = False
+            p, e = p[keep], e[keep]
+    return p, e
+
+
+def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolerance_px: float = 1.0,
+        outer_loops: int = 4, reduced_loops: int = 1, shake_iterations: int = 3, shake_step_px: float = 0.5,
+        final_iterations: int = 8, min_intensity: float = 0.1, duplicate_px: float = 1.0, initial=None,
+        reduced_tolerance: float = 0.5, calibration_error_px: float | None = None, progress=None) -> IPRResult:
+    """Iterative particle reconstruction of one frame (Wieneke 2013).
+
+    Parameters
+    ----------
+    images : per-camera (H, W) images (background subtracted), one per camera.
+    cameras : cameras (the camera contract plus ``pixel_to_ray``), at least 2.
+    otf : particle image model (:func:`~mitpiv.tracking.otf.calibrate_otf`).
+    lower_mm, upper_mm : measurement box [mm].
+    threshold : peak detection threshold (one value or one per camera); default
+        :func:`auto_threshold` of each input image (kept for every loop).
+    tolerance_px : allowed triangulation error [px]; must exceed the calibration's
+        reprojection error.
+    outer_loops : loops with all cameras; reduced_loops : further loops with every set of
+        one camera fewer (for particles hidden in one view; 0 to skip; needs >= 3 cameras).
+    shake_iterations, shake_step_px : shaking per loop and its first amplitude [px].
+    final_iterations : a last shake of every particle from a fifth of the amplitude (lets
+        overlapping particles settle).
+    min_intensity : particles below this fraction of the median intensity are removed.
+    duplicate_px : particles closer than this [px, object-space equivalent] merge.
+    initial : optional ``(positions_mm, intensities)`` to start from (STB's predictions).
+    reduced_tolerance : the reduced sets triangulate with this fraction of ``tolerance_px``
+        (a set with one camera fewer admits many more ghosts: their number grows with the
+        tolerance cubed for four cameras, squared for three).
+    calibration_error_px : the calibration's reprojection error [px], when known; it must
+        be below ``tolerance_px`` (else :class:`ConfigError`).
+    progress : see :mod:`mitpiv.progress`.
+
+    Raises
+    ------
+    ConfigError
+        When the calibration error reaches the tolerance, or when the first loop finds at
+        least 20 peaks in every camera but fewer than 5 % of them triangulate within the
+        tolerance (the cameras' calibration does not fit the images).
+
+    A camera that shows no peak at all in the frame (a dropped image) is left out.
+    """
+    imgs = _check_images(images, cameras, "ipr")
+    if otf.n_cameras != len(cameras):
+        raise ConfigError(f"ipr: the OTF has {otf.n_cameras} cameras, got {len(cameras)}; calibrate one per camera.")
+    lo = np.asarray(lower_mm, dtype=np.float64)
+    hi = np.asarray(upper_mm, dtype=np.float64)
+    if lo.shape != (3,) or hi.shape != (3,) or np.any(hi <= lo):
+        raise ConfigError(f"ipr: 'upper_mm' {upper_mm!r} must exceed 'lower_mm' {lower_mm!r} on every axis.")
+    for name, v in (("outer_loops", outer_loops), ("reduced_loops", reduced_loops), ("shake_iterations", shake_iterations),
+                    ("final_iterations", final_iterations)):
+        if isinstance(v, bool) or int(v) != v or v < 0:
+            raise ConfigError(f"ipr: '{name}' must be a non-negative integer, got {v!r}.")
+    tol = check_positive("tolerance_px", tolerance_px, owner="ipr", unit="px")
+    if calibration_error_px is not None and not float(calibration_error_px) < tol:
+        raise ConfigError(f"ipr: the calibration's reprojection error {calibration_error_px!r} px reaches the triangulation "
+                          f"tolerance tolerance_px={tol} px; true particles would not triangulate. Recalibrate "
+                          f"(volume self-calibration) or raise 'tolerance_px' above the calibration error.")
+    reduced_tol = tol * check_positive("reduced_tolerance", reduced_tolerance, owner="ipr")
+    thr = threshold if threshold is not None else [auto_threshold(i) for i in imgs]
+    thr = list(np.broadcast_to(np.asarray(thr, dtype=np.float64), (len(imgs),)))
+    scale = mm_per_px(cameras, 0.5 * (lo + hi))
+    step_mm = check_positive("shake_step_px", shake_step_px, owner="ipr", unit="px") * scale
+    dup_mm = check_positive("duplicate_px", duplicate_px, owner="ipr", unit="px") * scale
+    n = len(cameras)
+    blank = [k for k in range(n) if detect_peaks(imgs[k], threshold=thr[k])[0].shape[0] == 0]
+    if blank and initial is None:
+        # a camera that sees no particle in this frame carries no information: leave it out
+        live = [k for k in range(n) if k not in blank]
+        log.debug("ipr: cameras %s show no peak above the threshold; reconstructing with %s", blank, live)
+        if len(live) < 2:
+            return IPRResult(np.zeros((0, 3)), np.zeros(0), [i.copy() for i in imgs],
+                             [{"cameras": live, "peaks": [0] * n, "candidates": 0, "particles": 0}])
+        sub = OTF(otf.lower_mm, otf.upper_mm, otf.a[live], otf.b[live], otf.c[live], otf.peak[live])
+        r = ipr([imgs[k] for k in live], [cameras[k] for k in live], sub, lower_mm=lo, upper_mm=hi,
+                threshold=[thr[k] for k in live], tolerance_px=tol, outer_loops=outer_loops, reduced_loops=reduced_loops,
+                shake_iterations=shake_iterations, shake_step_px=shake_step_px, final_iterations=final_iterations,
+                min_intensity=min_intensity, duplicate_px=duplicate_px, reduced_tolerance=reduced_tolerance,
+                progress=progress)
+        res = [imgs[k].copy() for k in range(n)]
+        for j, k in enumerate(live):
+            res[k] = r.residuals[j]
+        return IPRResult(r.positions_mm, r.intensities, res, [dict(h, cameras=[live[c] for c in h["cameras"]]) for h in r.history])
+    if initial is not None:
+        p = np.asarray(initial[0], dtype=np.float64).reshape(-1, 3)
+        e = np.array(np.broadcast_to(np.asarray(initial[1], dtype=np.float64), (p.shape[0],)))
+    else:
+        p, e = np.zeros((0, 3)), np.zeros(0)
+    res = [i - pr for i, pr in zip(imgs, project_particles(p, e, cameras, otf), strict=True)] if p.size else [i.copy() for i in imgs]
+    sets = [list(range(n))] * int(outer_loops)
+    if n >= 3:
+        subsets = [list(s) for s in combinations(range(n), n - 1)]
+        sets += [s for _ in range(int(reduced_loops)) for s in subsets]
+    history = []
+    pk_otf = np.array([np.median(otf.peak[k]) for k in range(n)])
+    with bar(len(sets), desc="IPR", progress=progress) as pb:
+        for use in sets:
+            peaks = [detect_peaks(r, threshold=t) for r, t in zip(res, thr, strict=True)]
+            x, ids, _ = triangulate([q[0] for q in peaks], cameras, tolerance_px=tol if len(use) == n else reduced_tol,
+                                    lower_mm=lo, upper_mm=hi, use=use)
+            if x.shape[0] and len(use) < n:
+                # a particle missed by one camera must be hidden there (behind another
+                # particle's light in the raw image) or off its sensor: else it is a ghost
+                ok = np.ones(x.shape[0], bool)
+                for k in set(range(n)) - set(use):
+                    uv = cameras[k].project(x)
+                    on = cameras[k].visible(x)
+                    hk, wk = imgs[k].shape
+                    col = np.clip(np.nan_to_num(uv[:, 0]).astype(np.int64), 0, wk - 1)
+                    row = np.clip(np.nan_to_num(uv[:, 1]).astype(np.int64), 0, hk - 1)
+                    ok &= ~on | (imgs[k][row, col] > thr[k])
+                x, ids = x[ok], ids[ok]
+            n_cand = int(x.shape[0])
+            n_min = min(q[0].shape[0] for q in peaks)
+            if not history and p.shape[0] == 0 and initial is None and n_min >= 20 and n_cand < 0.05 * n_min:
+                raise ConfigError(
+                    f"ipr: {[int(q[0].shape[0]) for q in peaks]} peaks in the cameras but only {n_cand} triangulate "
+                    f"within tolerance_px={tol} px: the calibration does not fit the images (reprojection error above "
+                    f"the tolerance?). Check the cameras, recalibrate, or raise 'tolerance_px'.")
+            if x.shape[0]:
+                vals = np.stack([peaks[k][1][ids[:, k]] / pk_otf[k] for k in use], axis=1)
+                e_new = vals.mean(axis=1)
+                p = np.concatenate([p, x])
+                e = np.concatenate([e, e_new])
+            if p.shape[0]:
+                p, e, res = shake(imgs, cameras, otf, p, e, step_mm=step_mm, iterations=shake_iterations)
+                p, e = _prune(p, e, lo, hi, min_intensity, dup_mm)
+                res = [i - pr for i, pr in zip(imgs, project_particles(p, e, cameras, otf), strict=True)]
+            history.append({"cameras": use, "peaks": [int(q[0].shape[0]) for q in peaks], "candidates": n_cand,
+                            "particles": int(p.shape[0])})
+            log.debug("IPR loop cameras %s: %s peaks, %d candidates, %d particles", use,
+                      history[-1]["peaks"], n_cand, p.shape[0])
+            pb.update()
+    if p.shape[0] and final_iterations:
+        p, e, res = shake(imgs, cameras, otf, p, e, step_mm=0.2 * step_mm, iterations=final_iterations)
+        p, e = _prune(p, e, lo, hi, min_intensity, dup_mm)
+        res = [i - pr for i, pr in zip(imgs, project_particles(p, e, cameras, otf), strict=True)]
+    return IPRResult(p, e, res, history)

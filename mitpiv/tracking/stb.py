@@ -1,0 +1,347 @@
+"""Shake-The-Box (Schanz, Gesemann & Schroeder 2016): time-resolved particle tracking.
+
+Steps
+-----
+1. Initialisation: IPR (:func:`~mitpiv.tracking.ipr.ipr`) on each of the first four
+   frames; particles are linked into four-frame chains (:func:`link_four`): a
+   nearest-neighbour search from frame 0 to 1 (around an optional velocity guess), then
+   linear and quadratic extrapolation to frames 2 and 3, each within a search radius;
+   chains are kept in order of their smallest acceleration, each particle used once.
+2. Each later frame: every active track predicts its position by a polynomial fit
+   (order 2) through its last four positions; the predicted particles are shaken in the
+   frame's images (:func:`~mitpiv.tracking.ipr.shake`) with their last intensity.
+3. Termination: a track ends when its shaken particle fades (intensity below
+   ``min_intensity`` times the median), moves farther than ``max_shake_px`` from the
+   prediction, leaves the box, or merges with another track's particle (the shorter
+   ends).
+4. New particles: IPR on the residual images (images minus the tracked particles); all
+   particles are shaken together again; untracked particles of the last four frames are
+   linked into new tracks as in step 1.
+5. :func:`regularise`: a local polynomial (order 2, a window of ``2 h + 1`` frames) fitted
+   to every track at every time gives position, velocity and acceleration; windows are
+   truncated at track ends (the fit needs ``order + 1`` points).
+
+Tracks are stored as (n_tracks, n_frames, 3) arrays with NaN where a track is absent, so
+every step is vectorised over tracks (NumPy; SciPy KD-trees for the searches).
+Hand-written because no kept Python library offers STB.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mitpiv.errors import ConfigError, check_positive
+from mitpiv.progress import bar
+from mitpiv.tracking.ipr import _check_images, _prune, ipr, mm_per_px, shake
+from mitpiv.tracking.otf import OTF, project_particles
+
+__all__ = ["Tracks", "link_four", "predict", "regularise", "stb"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Tracks:
+    """Particle tracks over a sequence of frames.
+
+    Attributes
+    ----------
+    positions_mm : (n_tracks, n_frames, 3) positions [mm], NaN where a track is absent
+        (each track is one contiguous run of frames).
+    intensities : (n_tracks, n_frames) particle intensities (NaN where absent).
+    dt_s : time between frames [s].
+    velocities_mm_s, accelerations_mm_s2 : (n_tracks, n_frames, 3) from
+        :func:`regularise` (None before); positions are then the regularised ones and
+        ``raw_positions_mm`` keeps the shaken ones.
+    history : per frame, a dict of counts (active, new, ended tracks).
+    """
+
+    positions_mm: np.ndarray
+    intensities: np.ndarray
+    dt_s: float
+    velocities_mm_s: np.ndarray | None = None
+    accelerations_mm_s2: np.ndarray | None = None
+    raw_positions_mm: np.ndarray | None = field(default=None, repr=False)
+    history: list = field(default_factory=list, repr=False)
+
+    @property
+    def n_tracks(self) -> int:
+        return int(self.positions_mm.shape[0])
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.positions_mm.shape[1])
+
+    @property
+    def present(self) -> np.ndarray:
+        """(n_tracks, n_frames) True where the track has a particle."""
+        return np.all(np.isfinite(self.positions_mm), axis=2)
+
+    @property
+    def lengths(self) -> np.ndarray:
+        """(n_tracks,) number of frames of each track."""
+        return self.present.sum(axis=1)
+
+    def frame(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """Particles of one frame: (positions (K, 3) [mm], track indices (K,))."""
+        ids = np.flatnonzero(self.present[:, index])
+        return self.positions_mm[ids, index], ids
+
+
+# ---------------------------------------------------------------------- linking
+def _greedy_unique(chains, cost):
+    """Keep chains in order of increasing cost so that no particle is used twice."""
+    order = np.argsort(cost, kind="stable")
+    chains, keep_all = chains[order], []
+    alive = np.ones(chains.shape[0], bool)
+    while alive.any():
+        idx = np.flatnonzero(alive)
+        first = np.ones(idx.size, bool)
+        for col in range(chains.shape[1]):
+            _, pos = np.unique(chains[idx, col], return_index=True)
+            f = np.zeros(idx.size, bool)
+            f[pos] = True
+            first &= f
+        # a chain first in every column among the alive is better than all its rivals
+        kept = idx[first]
+        keep_all.append(kept)
+        alive[kept] = False
+        for col in range(chains.shape[1]):
+            alive &= ~np.isin(chains[:, col], chains[kept, col])
+    kept = np.sort(np.concatenate(keep_all)) if keep_all else np.zeros(0, np.int64)
+    return chains[kept], cost[order][kept]
+
+
+def link_four(frames, *, search_mm: float, predict_mm: float, velocity_guess=None, dt_s: float = 1.0):
+    """Link particles of four consecutive frames into chains.
+
+    Parameters
+    ----------
+    frames : four (N_f, 3) position arrays [mm].
+    search_mm : radius around ``x0 + velocity_guess(x0) dt`` searched in frame 1.
+    predict_mm : radius around the linear (frame 2) and quadratic (frame 3) extrapolation.
+    velocity_guess : None (zero), a (3,) velocity [mm/s] or a callable ``v(p_mm) -> (N, 3)``.
+    dt_s : frame interval [s] (only scales ``velocity_guess``).
+
+    Returns
+    -------
+    (K, 4) particle indices, one chain per row, no particle in two chains.
+    """
+    from scipy.spatial import cKDTree
+
+    if len(frames) != 4:
+        raise ConfigError(f"link_four: need 4 frames, got {len(frames)}.")
+    f = [np.asarray(x, dtype=np.float64).reshape(-1, 3) for x in frames]
+    if any(x.shape[0] == 0 for x in f):
+        return np.zeros((0, 4), np.int64)
+    rs = check_positive("search_mm", search_mm, owner="link_four", unit="mm")
+    rp = check_positive("predict_mm", predict_mm, owner="link_four", unit="mm")
+    if velocity_guess is None:
+        guess = f[0]
+    elif callable(velocity_guess):
+        guess = f[0] + np.asarray(velocity_guess(f[0]), dtype=np.float64) * dt_s
+    else:
+        guess = f[0] + np.asarray(velocity_guess, dtype=np.float64).reshape(1, 3) * dt_s
+    m = cKDTree(guess).sparse_distance_matrix(cKDTree(f[1]), rs, output_type="coo_matrix")
+    chains = np.stack([m.row, m.col], axis=1).astype(np.int64)
+    for k in (2, 3):
+        if chains.shape[0] == 0:
+            return np.zeros((0, 4), np.int64)
+        x = [f[j][chains[:, j]] for j in range(k)]
+        pred = 2 * x[1] - x[0] if k == 2 else 3 * x[2] - 3 * x[1] + x[0]
+        m = cKDTree(pred).sparse_distance_matrix(cKDTree(f[k]), rp, output_type="coo_matrix")
+        chains = np.concatenate([chains[m.row], m.col[:, None].astype(np.int64)], axis=1)
+    if chains.shape[0] == 0:
+        return np.zeros((0, 4), np.int64)
+    x = [f[j][chains[:, j]] for j in range(4)]
+    cost = np.linalg.norm(x[2] - 2 * x[1] + x[0], axis=1) + np.linalg.norm(x[3] - 2 * x[2] + x[1], axis=1)
+    return _greedy_unique(chains, cost)[0]
+
+
+# ---------------------------------------------------------------------- prediction
+def predict(positions_mm, *, points: int = 4, order: int = 2) -> np.ndarray:
+    """Extrapolate tracks one frame ahead by a least-squares polynomial of ``order``
+    through their last ``points`` positions.
+
+    positions_mm : (K, L, 3) last positions of K tracks (L >= points, oldest first, no
+    NaN in the last ``points``). Returns (K, 3).
+    """
+    x = np.asarray(positions_mm, dtype=np.float64)
+    if x.shape[1] < points or points <= order:
+        raise ConfigError(f"predict: need at least {points} > order={order} positions per track, got {x.shape[1]}.")
+    t = np.arange(-points + 1, 1, dtype=np.float64)
+    v = np.vander(t, order + 1, increasing=True)
+    w = np.vander(np.array([1.0]), order + 1, increasing=True) @ np.linalg.pinv(v)  # (1, points)
+    return np.einsum("p,kpc->kc", w[0], x[:, -points:])
+
+
+# ---------------------------------------------------------------------- regularisation
+def regularise(tracks: Tracks, *, half_window: int = 3, order: int = 2) -> Tracks:
+    """Local polynomial fit along every track (see the module notes, step 5).
+
+    Returns a new :class:`Tracks` with regularised positions, velocities [mm/s] and
+    accelerations [mm/s^2] (NaN where the track is absent or shorter than ``order + 1``).
+    """
+    from scipy.ndimage import correlate1d
+
+    h = int(half_window)
+    if h < 1 or int(order) not in (1, 2, 3) or 2 * h + 1 <= order:
+        raise ConfigError(f"regularise: 'half_window' must be >= 1 and 'order' 1, 2 or 3 with 2 h + 1 > order, "
+                          f"got {half_window!r}, {order!r}.")
+    order = int(order)
+    x = tracks.positions_mm
+    w = np.all(np.isfinite(x), axis=2).astype(np.float64)
+    x0 = np.where(w[..., None] > 0, x, 0.0)
+    k = np.arange(-h, h + 1, dtype=np.float64)
+    s = np.stack([correlate1d(w, k**m, axis=1, mode="constant") for m in range(2 * order + 1)], axis=-1)
+    tm = np.stack([correlate1d(x0, k**m, axis=1, mode="constant") for m in range(order + 1)], axis=-1)  # (T, F, 3, o+1)
+    idx = np.arange(order + 1)
+    a = s[..., idx[:, None] + idx[None, :]]  # (T, F, o+1, o+1)
+    n_pts = s[..., 0]
+    ok = (w > 0) & (n_pts >= order + 1)
+    a = np.where(ok[..., None, None], a, np.eye(order + 1))
+    coef = np.linalg.solve(a[:, :, None], tm[..., None])[..., 0]  # (T, F, 3, o+1)
+    coef = np.where(ok[..., None, None], coef, np.nan)
+    dt = tracks.dt_s
+    pos = coef[..., 0]
+    vel = coef[..., 1] / dt
+    acc = 2 * coef[..., 2] / dt**2 if order >= 2 else np.where(ok[..., None], 0.0, np.nan)
+    return Tracks(pos, tracks.intensities, dt, vel, acc, tracks.positions_mm, tracks.history)
+
+
+# ---------------------------------------------------------------------- STB
+def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_px: float = 10.0,
+        predict_px: float = 1.5, max_shake_px: float = 1.0, velocity_guess=None, shake_iterations: int = 4,
+        min_intensity: float = 0.1, threshold=None, ipr_options: dict | None = None,
+        regularise_window: int = 3, progress=None) -> Tracks:
+    """Track particles through a time-resolved image sequence with Shake-The-Box.
+
+    Parameters
+    ----------
+    sequence : list of frames, each a list of per-camera (H, W) images (at least 4 frames).
+    cameras : the cameras (camera contract plus ``pixel_to_ray``); otf : particle image model.
+    dt_s : frame interval [s].
+    lower_mm, upper_mm : measurement box [mm].
+    search_px : search radius from frame 0 to 1 around the velocity guess [px, object
+        space equivalent]; must exceed the largest displacement error of the guess.
+    predict_px : search radius around extrapolated positions (initialisation) [px].
+    max_shake_px : a shaken particle farther than this from its prediction ends its track [px].
+    velocity_guess : None, a (3,) velocity [mm/s] or ``v(p_mm)``: the initial link predictor.
+    shake_iterations : shaking of tracked particles per frame.
+    min_intensity : fraction of the median intensity below which a particle is dropped.
+    threshold : peak threshold for IPR (see :func:`~mitpiv.tracking.ipr.ipr`).
+    ipr_options : more keyword arguments for the IPR calls.
+    regularise_window : half window of :func:`regularise` (0 to skip the regularisation).
+
+    Returns
+    -------
+    :class:`Tracks` (regularised unless ``regularise_window`` is 0).
+    """
+    from scipy.spatial import cKDTree
+
+    n_frames = len(sequence)
+    if n_frames < 4:
+        raise ConfigError(f"stb: a sequence of {n_frames} frame(s) is too short; Shake-The-Box initialises tracks "
+                          f"over 4 frames. Give at least 4 frames, or use mitpiv.tracking.ipr for single frames.")
+    frames = [_check_images(f, cameras, f"stb (frame {i})") for i, f in enumerate(sequence)]
+    dt = check_positive("dt_s", dt_s, owner="stb", unit="s")
+    lo = np.asarray(lower_mm, dtype=np.float64)
+    hi = np.asarray(upper_mm, dtype=np.float64)
+    if lo.shape != (3,) or hi.shape != (3,) or np.any(hi <= lo):
+        raise ConfigError(f"stb: 'upper_mm' {upper_mm!r} must exceed 'lower_mm' {lower_mm!r} on every axis.")
+    scale = mm_per_px(cameras, 0.5 * (lo + hi))
+    search_mm = check_positive("search_px", search_px, owner="stb", unit="px") * scale
+    predict_mm = check_positive("predict_px", predict_px, owner="stb", unit="px") * scale
+    max_shake_mm = check_positive("max_shake_px", max_shake_px, owner="stb", unit="px") * scale
+    opts = dict(ipr_options or {})
+    opts.setdefault("min_intensity", min_intensity)
+
+    def run_ipr(images, initial=None):
+        return ipr(images, cameras, otf, lower_mm=lo, upper_mm=hi, threshold=threshold, initial=initial, **opts)
+
+    pos = np.full((0, n_frames, 3), np.nan)
+    inten = np.full((0, n_frames), np.nan)
+    active = np.zeros(0, bool)
+    free = {}  # frame -> (positions, intensities) of untracked particles
+    history = []
+
+    def start_tracks(f_last):
+        nonlocal pos, inten, active
+        fs = [f_last - 3 + j for j in range(4)]
+        chains = link_four([free[f][0] for f in fs], search_mm=search_mm, predict_mm=predict_mm,
+                           velocity_guess=velocity_guess, dt_s=dt)
+        if chains.shape[0] == 0:
+            return 0
+        new_p = np.full((chains.shape[0], n_frames, 3), np.nan)
+        new_e = np.full((chains.shape[0], n_frames), np.nan)
+        for j, f in enumerate(fs):
+            new_p[:, f] = free[f][0][chains[:, j]]
+            new_e[:, f] = free[f][1][chains[:, j]]
+            keep = np.ones(free[f][0].shape[0], bool)
+            keep[chains[:, j]] = False
+            free[f] = (free[f][0][keep], free[f][1][keep])
+        pos = np.concatenate([pos, new_p])
+        inten = np.concatenate([inten, new_e])
+        active = np.concatenate([active, np.ones(chains.shape[0], bool)])
+        return int(chains.shape[0])
+
+    with bar(n_frames, desc="STB", progress=progress) as pb:
+        for f in range(n_frames):
+            imgs = frames[f]
+            n_end = 0
+            tracked = np.flatnonzero(active)
+            if f >= 4 and tracked.size:
+                pred = predict(pos[tracked, f - 4:f])
+                e0 = inten[tracked, f - 1]
+                ps, es, _ = shake(imgs, cameras, otf, pred, e0, step_mm=0.5 * max_shake_mm, iterations=shake_iterations)
+                ok = np.all(np.isfinite(ps), axis=1) & (np.linalg.norm(ps - pred, axis=1) <= max_shake_mm)
+                ok &= np.all((ps >= lo) & (ps <= hi), axis=1) & np.all((pred >= lo) & (pred <= hi), axis=1)
+                ref = np.median(es[ok]) if ok.any() else 0.0
+                ok &= es > min_intensity * ref
+                active[tracked[~ok]] = False
+                n_end = int((~ok).sum())
+                tracked = tracked[ok]
+                pos[tracked, f], inten[tracked, f] = ps[ok], es[ok]
+            else:
+                tracked = np.zeros(0, np.int64)
+            # new particles from the residual images, then everything shaken together
+            tp, te = pos[tracked, f], inten[tracked, f]
+            res = [i - pr for i, pr in zip(imgs, project_particles(tp, te, cameras, otf), strict=True)] if tracked.size else imgs
+            new = run_ipr(res)
+            allp = np.concatenate([tp, new.positions_mm])
+            alle = np.concatenate([te, new.intensities])
+            if allp.shape[0]:
+                allp, alle, _ = shake(imgs, cameras, otf, allp, alle, step_mm=0.2 * max_shake_mm, iterations=shake_iterations)
+            nt = tracked.size
+            # merged tracks: two tracked particles closer than 1 px end the shorter track
+            if nt > 1:
+                pairs = cKDTree(allp[:nt]).query_pairs(scale, output_type="ndarray")
+                if pairs.size:
+                    lens = np.isfinite(pos[tracked, :, 0]).sum(axis=1)
+                    loser = np.where(lens[pairs[:, 0]] >= lens[pairs[:, 1]], pairs[:, 1], pairs[:, 0])
+                    gone = np.zeros(nt, bool)
+                    gone[loser] = True
+                    active[tracked[gone]] = False
+                    pos[tracked[gone], f] = np.nan
+                    inten[tracked[gone], f] = np.nan
+                    n_end += int(gone.sum())
+                    keepm = np.concatenate([~gone, np.ones(allp.shape[0] - nt, bool)])
+                    allp, alle, tracked = allp[keepm], alle[keepm], tracked[~gone]
+                    nt = tracked.size
+            pos[tracked, f], inten[tracked, f] = allp[:nt], alle[:nt]
+            fp, fe = _prune(allp[nt:], alle[nt:], lo, hi, min_intensity, scale)
+            if fp.shape[0] and nt:
+                d, _ = cKDTree(allp[:nt]).query(fp, k=1)
+                fp, fe = fp[d > scale], fe[d > scale]
+            free[f] = (fp, fe)
+            n_new = start_tracks(f) if f >= 3 else 0
+            free.pop(f - 3, None)
+            history.append({"frame": f, "active": int(active.sum()), "new": n_new, "ended": n_end,
+                            "untracked": int(free[f][0].shape[0]) if f in free else 0})
+            log.debug("STB frame %d: %s", f, history[-1])
+            pb.update()
+    tracks = Tracks(pos, inten, dt, history=history)
+    return regularise(tracks, half_window=regularise_window) if regularise_window else tracks
