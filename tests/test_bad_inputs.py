@@ -1,0 +1,274 @@
+"""Every bad input a clear, early error (issue 29): one table row per hostile input a fuzz
+run tried, run through the CLI in-process (``mitpiv.cli.main(argv)``), each asserting exit
+status 2, a one-line message that names the parameter, no traceback, and no new file in
+the output folder or beside the inputs.
+
+The files the rows refer to are made once per module: a 24 x 24 px image with a pinhole
+camera in its metadata (frames 0 and 1), an RGB image, a truth file, a volume, and
+malformed files of every format (empty, truncated, text, a missing key, a pickled
+object array, a single .npy array). Rows name them as ``{name}`` placeholders.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mitpiv.cli import main
+from mitpiv.grid import VoxelGrid
+from mitpiv.io import write_exr, write_particles_ply, write_truth, write_volume
+from mitpiv.physics.camera import PinholeCamera
+
+ROOT = Path(__file__).resolve().parents[1]
+GRID = VoxelGrid((0.0, 0.0, 0.0), (0.1, 0.1, 0.1), (8, 8, 8))
+
+
+# ---------------------------------------------------------------------------- the files
+@pytest.fixture(scope="module")
+def files(tmp_path_factory) -> dict:
+    d = tmp_path_factory.mktemp("bad")
+    f = {"dir": str(d)}
+    cam = PinholeCamera((24, 24), 50.0, 10.0, position_mm=(0.0, 0.0, -500.0))
+    img = np.zeros((24, 24), np.float32)
+    img[10:13, 10:13] = 1.0
+    for frame in (0, 1):
+        meta = {"camera": cam.to_dict(), "sensor_id": "cam0", "frame": frame}
+        f[f"img{frame}"] = str(write_exr(d / f"cam0_frame{frame:03d}.exr", img, meta))
+    f["rgb"] = str(write_exr(d / "rgb.exr", np.stack([img, 0.5 * img, 0.1 * img], -1), {"camera": cam.to_dict()}))
+    pts = np.random.default_rng(0).uniform(0.1, 0.7, (20, 3))
+    f["truth"] = str(write_truth(d / "truth.npz", positions_mm=[pts, pts + 0.01], times_s=[0.0, 0.01],
+                                 diameters_um=1.0, flow={"kind": "uniform", "velocity_mm_s": [1.0, 0.0, 0.0]}))
+    f["vol"] = str(write_volume(d / "vol.npz", np.zeros(GRID.shape, np.float32), {"grid": GRID.to_dict()}))
+    f["vol_b"] = str(write_volume(d / "vol_b.npz", np.zeros(GRID.shape, np.float32), {"grid": GRID.to_dict()}))
+    # malformed files of every kind
+    (d / "empty.npz").write_bytes(b"")
+    (d / "empty.exr").write_bytes(b"")
+    good = Path(f["truth"]).read_bytes()
+    (d / "trunc.npz").write_bytes(good[: len(good) // 2])
+    (d / "text.npz").write_text("positions_mm = 1, 2, 3\n")
+    (d / "text.exr").write_text("not an image\n")
+    with open(d / "nokey.npz", "wb") as fh:
+        np.savez(fh, positions_mm=np.stack([pts, pts]), diameters_um=np.ones(20))
+    with open(d / "pickled.npz", "wb") as fh:
+        np.savez(fh, positions_mm=np.array([{"a": 1}], dtype=object), times_s=np.zeros(1))
+    np.save(d / "single.npy", np.zeros(3))
+    shutil.copy(d / "single.npy", d / "single.npz")
+    with open(d / "badmeta.npz", "wb") as fh:
+        np.savez(fh, volume=np.zeros(GRID.shape), meta=np.array("{not json"))
+    with open(d / "volnogrid.npz", "wb") as fh:
+        np.savez(fh, volume=np.zeros(GRID.shape), meta=np.array(json.dumps({"method": "x"})))
+    with open(d / "volshape.npz", "wb") as fh:
+        np.savez(fh, volume=np.zeros((3, 3)), meta=np.array(json.dumps({"grid": GRID.to_dict()})))
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as z:
+        z.writestr("hello.txt", "a zip, not an npz")
+    (d / "zip.npz").write_bytes(buf.getvalue())
+    f["nan_ply"] = str(d / "nan.ply")
+    write_particles_ply(d / "nan.ply", pts, 1.0, proxy_radius_mm=0.01)
+    raw = bytearray((d / "nan.ply").read_bytes())
+    raw[-56:-52] = np.float32(np.nan).tobytes()  # x of the last particle
+    (d / "nan.ply").write_bytes(bytes(raw))
+    # a tomo experiment (checked with --check: nothing renders)
+    exp = d / "exp"
+    shutil.copytree(ROOT / "scenes" / "tomo4", exp, ignore=shutil.ignore_patterns("*.ply", "*.npz", "*.py", "*.md"))
+    f["exp"] = str(exp / "experiment.toml")
+    f["exp_text"] = (exp / "experiment.toml").read_text()
+    f["scene"] = str(exp / "scene.xml")
+    return f
+
+
+@dataclass(frozen=True)
+class Case:
+    id: str
+    argv: tuple
+    names: str  # the message must name this (the parameter or file)
+    toml: tuple = ()  # (old, new) text replacements of the experiment file
+
+
+def C(id, argv, names, toml=()):
+    return pytest.param(Case(id, tuple(argv.split()), names, tuple(toml)), id=id)
+
+
+OUT = "{out}"
+RECON = "reconstruct {img0} {img1} --out {out}/v.npz --bounds 0 0.8 0 0.8 0 0.8 --voxel-mm 0.1"
+SENSOR = "sensor {img0} --out {out}"
+PIV = "piv {vol} {vol_b} --out {out}/f.npz"
+EVAL = "evaluate {vol} --truth {truth} --out {out}/m.json"
+RUN = "run {exp} --check"
+
+CASES = [
+    # --- seeds
+    C("render-seed-neg", "render {scene} --out {out} --seed -1", "--seed"),
+    C("render-seed-huge", "render {scene} --out {out} --seed 18446744073709551616", "--seed"),
+    C("render-seed-text", "render {scene} --out {out} --seed abc", "--seed"),
+    C("sensor-seed-neg", SENSOR + " --seed -1", "--seed"),
+    C("bench-seed-neg", "bench accuracy-time --out {out}/b --quick --seed -1", "--seed"),
+    C("run-seed-neg", RUN + " --seed -1", "seed"),
+    # --- --out is a file where a folder goes, or a folder where a file goes
+    C("render-out-file", "render {scene} --out {img0}", "--out"),
+    C("sensor-out-file", "sensor {img0} --out {img1}", "--out"),
+    C("reconstruct-out-dir", "reconstruct {img0} {img1} --out {out} --bounds 0 0.8 0 0.8 0 0.8 --voxel-mm 0.1",
+      "--out"),
+    C("piv-out-dir", "piv {vol} {vol_b} --out {out}", "--out"),
+    C("evaluate-out-dir", "evaluate {vol} --truth {truth} --out {out}", "--out"),
+    C("refocus-out-dir", "refocus {vol} --out {out} --z 0", "--out"),
+    C("decode-out-dir", "decode {img0} --out {out}", "--out"),
+    C("run-out-file", "run {exp} --out {img0}", "--out"),
+    C("sweep-out-file", "sweep {exp} --out {img0}", "--out"),
+    # --- sensor
+    C("sensor-exposure-neg", SENSOR + " --exposure -1", "exposure"),
+    C("sensor-exposure-nan", SENSOR + " --exposure nan", "exposure"),
+    C("sensor-bitdepth", SENSOR + " --bit-depth 7", "bit"),
+    C("sensor-qe", SENSOR + " --qe 1.5", "quantum_efficiency"),
+    C("sensor-rgb", "sensor {rgb} --out {out}", "rgb.exr"),
+    C("sensor-text-exr", "sensor {dir}/text.exr --out {out}", "text.exr"),
+    C("sensor-empty-exr", "sensor {dir}/empty.exr --out {out}", "empty.exr"),
+    C("sensor-missing", "sensor {dir}/nothere.exr --out {out}", "nothere.exr"),
+    # --- refocus
+    C("refocus-neg-planes", "refocus {img0} --out {out}/s.npy --z-range -1 1 -3", "--z-range"),
+    C("refocus-frac-planes", "refocus {img0} --out {out}/s.npy --z-range -1 1 2.5", "--z-range"),
+    C("refocus-zero-planes", "refocus {img0} --out {out}/s.npy --z-range -1 1 0", "--z-range"),
+    C("refocus-nan-z", "refocus {img0} --out {out}/s.npy --z nan", "--z"),
+    C("refocus-huge-planes", "refocus {img0} --out {out}/s.npy --z-range -1 1 1e12", "--z-range"),
+    # --- reconstruct
+    C("reconstruct-iter-neg", RECON + " --iterations -1", "--iterations"),
+    C("reconstruct-iter-huge", RECON + " --iterations 100000000000", "--iterations"),
+    C("reconstruct-voxel-neg", "reconstruct {img0} {img1} --out {out}/v.npz --bounds 0 0.8 0 0.8 0 0.8 "
+      "--voxel-mm -0.1", "--voxel-mm"),
+    C("reconstruct-voxel-2", "reconstruct {img0} {img1} --out {out}/v.npz --bounds 0 0.8 0 0.8 0 0.8 "
+      "--voxel-mm 0.1 0.1", "--voxel-mm"),
+    C("reconstruct-voxel-swallows", "reconstruct --out {out}/v.npz --bounds 0 0.8 0 0.8 0 0.8 --voxel 0.1 "
+      "{img0} {img0}", "same"),
+    C("reconstruct-bounds-inverted", "reconstruct {img0} {img1} --out {out}/v.npz --bounds 0.8 0 0 0.8 0 0.8 "
+      "--voxel-mm 0.1", "--bounds"),
+    C("reconstruct-bounds-nan", "reconstruct {img0} {img1} --out {out}/v.npz --bounds nan 0.8 0 0.8 0 0.8 "
+      "--voxel-mm 0.1", "--bounds"),
+    C("reconstruct-huge-volume", "reconstruct {img0} {img1} --out {out}/v.npz --bounds 0 1000 0 1000 0 1000 "
+      "--voxel-mm 0.01", "memory"),
+    C("reconstruct-same-image", "reconstruct {img0} {img0} {img0} {img0} --out {out}/v.npz --bounds 0 0.8 0 0.8 "
+      "0 0.8 --voxel-mm 0.1", "same"),
+    C("reconstruct-mixed-frames", RECON, "frame"),
+    C("reconstruct-mu", RECON.replace("{img1}", "") + " --mu 2.5", "--mu"),
+    C("reconstruct-rays", RECON.replace("{img1}", "") + " --rays-per-pixel 0", "--rays-per-pixel"),
+    C("reconstruct-frame-neg", RECON.replace("{img1}", "") + " --truth {truth} --frame -1", "--frame"),
+    C("reconstruct-frame-big", RECON.replace("{img1}", "") + " --truth {truth} --frame 7", "--frame"),
+    C("reconstruct-text-exr", "reconstruct {dir}/text.exr --out {out}/v.npz --bounds 0 0.8 0 0.8 0 0.8 "
+      "--voxel-mm 0.1", "text.exr"),
+    C("reconstruct-truth-empty", RECON.replace("{img1}", "") + " --truth {dir}/empty.npz", "empty.npz"),
+    # --- evaluate
+    C("evaluate-frame-neg", EVAL + " --frame -1", "--frame"),
+    C("evaluate-frame-big", EVAL + " --frame 2", "--frame"),
+    C("evaluate-threshold", EVAL + " --threshold-rel 1.5", "threshold"),
+    C("evaluate-radius", EVAL + " --radius-voxels -2", "radius"),
+    C("evaluate-truth-empty", "evaluate {vol} --truth {dir}/empty.npz", "empty.npz"),
+    C("evaluate-truth-trunc", "evaluate {vol} --truth {dir}/trunc.npz", "trunc.npz"),
+    C("evaluate-truth-text", "evaluate {vol} --truth {dir}/text.npz", "text.npz"),
+    C("evaluate-truth-nokey", "evaluate {vol} --truth {dir}/nokey.npz", "times_s"),
+    C("evaluate-truth-pickled", "evaluate {vol} --truth {dir}/pickled.npz", "pickled.npz"),
+    C("evaluate-truth-npy", "evaluate {vol} --truth {dir}/single.npz", "single.npz"),
+    C("evaluate-truth-zip", "evaluate {vol} --truth {dir}/zip.npz", "zip.npz"),
+    C("evaluate-vol-empty", "evaluate {dir}/empty.npz --truth {truth}", "empty.npz"),
+    C("evaluate-vol-badmeta", "evaluate {dir}/badmeta.npz --truth {truth}", "badmeta.npz"),
+    C("evaluate-vol-nogrid", "evaluate {dir}/volnogrid.npz --truth {truth}", "volnogrid.npz"),
+    C("evaluate-vol-shape", "evaluate {dir}/volshape.npz --truth {truth}", "volshape.npz"),
+    C("evaluate-vol-is-truth", "evaluate {truth} --truth {truth}", "truth.npz"),
+    # --- piv
+    C("piv-windows-abc", PIV + " --windows abc", "--windows"),
+    C("piv-windows-frac", PIV + " --windows 16.5", "--windows"),
+    C("piv-windows-axb", PIV + " --windows axb", "--windows"),
+    C("piv-windows-zero", PIV + " --windows 0", "--windows"),
+    C("piv-windows-neg", PIV + " --windows -8", "--windows"),
+    C("piv-overlap-1", PIV + " --overlap 1.0", "--overlap"),
+    C("piv-overlap-nan", PIV + " --overlap nan", "--overlap"),
+    C("piv-overlap-huge-cost", PIV + " --windows 4 --overlap 0.99", "overlap"),
+    C("piv-dt-neg", PIV + " --dt-s -1", "--dt-s"),
+    C("piv-frame-neg", PIV + " --windows 4 --truth {truth} --frame -1", "--frame"),
+    C("piv-truth-nokey", PIV + " --windows 4 --truth {dir}/nokey.npz", "times_s"),
+    C("piv-vol-empty", "piv {dir}/empty.npz {vol} --out {out}/f.npz", "empty.npz"),
+    # --- decode / info
+    C("decode-no-camera", "decode {dir}/text.exr --out {out}/lf.npz", "text.exr"),
+    C("decode-oversample", "decode {img0} --out {out}/lf.npz --angular-oversample 0", "--angular-oversample"),
+    C("info-empty", "info {dir}/empty.exr", "empty.exr"),
+    # --- sweep
+    C("sweep-workers-neg", "sweep {exp} --out {out}/s --workers -1", "--workers"),
+    C("sweep-workers-zero", "sweep {exp} --out {out}/s --workers 0", "--workers"),
+    C("sweep-scheduler-dead", "sweep {exp} --out {out}/s --scheduler tcp://127.0.0.1:1", "--scheduler"),
+    C("sweep-scheduler-junk", "sweep {exp} --out {out}/s --scheduler notanaddress", "--scheduler"),
+    # --- the experiment (TOML) tables, through --check and --set
+    C("toml-typo-seeding", RUN, "cont", [("count = 12000", "cont = 12000")]),
+    C("toml-typo-flow", RUN, "ring_radius", [("ring_radius_mm", "ring_radius")]),
+    C("toml-typo-sensor", RUN + " --set sensor.exposre=2.0", "exposre"),
+    C("toml-typo-reconstruction", RUN, "iteration", [("iterations = 5", "iteration = 5")]),
+    C("toml-typo-particles", RUN, "threshold", [("threshold_rel", "threshold")]),
+    C("toml-typo-render", RUN + " --set render.sp=4", "sp"),
+    C("toml-typo-piv", RUN, "overlp", [("overlap", "overlp")]),
+    C("toml-typo-top", RUN + " --set sed=3", "sed"),
+    C("toml-dt-string", RUN, "dt_s", [("dt_s = 0.002", 'dt_s = "x"')]),
+    C("toml-count-string", RUN, "count", [("count = 12000", 'count = "many"')]),
+    C("toml-exposure-string", RUN + ' --set sensor.exposure="high"', "exposure"),
+    C("toml-box-2", RUN, "box_min_mm", [("box_min_mm = [-20.0, -20.0, -4.0]", "box_min_mm = [-20.0, -20.0]")]),
+    C("toml-xml-int", RUN, "xml", [('xml = "scene.xml"', "xml = 5")]),
+    C("toml-reconstruction-int", RUN + " --set reconstruction=3", "reconstruction"),
+    C("toml-count-huge", RUN, "count", [("count = 12000", "count = 1000000000000")]),
+    C("toml-voxel-string", RUN, "voxel_mm", [("voxel_mm = 0.1", 'voxel_mm = "0.1"')]),
+    C("toml-iterations-frac", RUN, "iterations", [("iterations = 5", "iterations = 2.5")]),
+    C("toml-seed-bool", RUN, "seed", [("seed = 0", "seed = true")]),
+    C("toml-overlap-string", RUN + ' --set piv.overlap="0.5"', "overlap"),
+    C("toml-deform-int", RUN + " --set piv.deform=1", "deform"),
+    C("toml-windows-float", RUN + " --set piv.windows=[32.5]", "windows"),
+    C("toml-spp-float", RUN + " --set render.spp=2.0", "spp"),
+    C("toml-diameter-bool", RUN + " --set seeding.diameter_um=true", "diameter_um"),
+    C("toml-voxel-huge-volume", RUN + " --set reconstruction.voxel_mm=0.0001", "voxel"),
+    C("toml-iterations-huge", RUN + " --set reconstruction.iterations=100000000000", "iterations"),
+    C("toml-overlap-cost", RUN + " --set piv.overlap=0.999 --set piv.windows=[4]", "overlap"),
+    C("toml-nan", RUN + " --set flow.dt_s=nan", "dt_s"),
+    C("toml-inf", RUN + " --set seeding.diameter_um=inf", "diameter_um"),
+    C("toml-center-nan", RUN + " --set flow.center=[nan,0.0,0.0]", "center"),
+    C("toml-proxy-bigger-than-box", RUN + " --set seeding.proxy_radius_mm=50.0", "proxy_radius_mm"),
+    C("toml-set-noeq", "run {exp} --check --set reconstruction.iterations", "--set"),
+    C("toml-missing-file", "run {dir}/nothere.toml --check", "nothere.toml"),
+    C("toml-not-toml", "run {img0} --check", "cam0_frame000.exr"),
+    # typed flags of mitpiv run
+    C("run-iterations-neg", RUN + " --iterations -3", "iterations"),
+    C("run-voxel-zero", RUN + " --voxel-mm 0", "voxel_mm"),
+]
+
+
+def _fill(argv, files, out):
+    return [a.format(**files, out=out) for a in argv]
+
+
+def _listing(*folders):
+    return {p for d in folders for p in Path(d).rglob("*")}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_bad_input_is_one_clear_line(case, files, tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = _fill(case.argv, files, out)
+    if case.toml:
+        text = files["exp_text"]
+        for old, new in case.toml:
+            assert old in text, old
+            text = text.replace(old, new)
+        exp = Path(files["exp"]).with_name(f"{case.id}.toml")
+        exp.write_text(text)
+        argv = [str(exp) if a == files["exp"] else a for a in argv]
+    before = _listing(files["dir"], out)
+    rc = main(argv)
+    err = capsys.readouterr().err
+    assert rc == 2, (rc, err)
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert lines and lines[0].startswith("mitpiv: error:") and len(lines) == 1, err
+    assert "Traceback" not in err, err
+    assert case.names in err, err
+    after = _listing(files["dir"], out) - {Path(files["exp"]).with_name(f"{case.id}.toml")}
+    assert after == before, sorted(map(str, after - before))
