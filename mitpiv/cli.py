@@ -377,13 +377,12 @@ def cmd_reconstruct(args) -> int:
 
     out = _out_file(args.out, (".npz",))
     grid = _grid_from_args(args)
-    costs.check_memory(costs.reconstruction_cost(grid.n_voxels,
-                                                 n_images=len(args.images), iterations=args.iterations,
-                                                 method=args.method),
-                       what=f"reconstruct: --voxel-mm {args.voxel_mm} on --bounds", fix="use larger voxels (--voxel-mm) "
-                       "or a smaller volume (--bounds)")
     truth = _check_truth_frame(args.truth, args.frame) if args.truth else None
     images, metas = _reconstruct_inputs(args.images)
+    costs.check_memory(costs.reconstruction_cost(grid.n_voxels, n_images=len(images), iterations=args.iterations,
+                                                 method=args.method),
+                       what=f"reconstruct: --voxel-mm {args.voxel_mm} on --bounds {' '.join(map(str, args.bounds))}",
+                       fix="use larger voxels (--voxel-mm) or a smaller volume (--bounds)")
     logging.getLogger("mitpiv").info("grid %dx%dx%d voxels of %s mm, %d image(s), method %s", grid.shape[2],
                                      grid.shape[1], grid.shape[0], grid.voxel_mm, len(images), args.method)
     t0 = time.perf_counter()

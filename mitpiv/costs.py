@@ -104,14 +104,18 @@ def available_memory_bytes() -> int:
         return 2**62
 
 
-def check_memory(cost: Cost, *, what: str, fix: str, available: int | None = None) -> Cost:
+def check_memory(cost: Cost, *, what: str, fix: str, available: int | None = None, quiet: bool = False) -> Cost:
     """Raise :class:`ConfigError` when ``cost.memory_bytes`` exceeds ``MEMORY_FRACTION`` of
     the available memory, naming ``what`` (the knob and its value) and ``fix``; otherwise
-    log the estimate and return ``cost``."""
+    log the estimate (info; a warning above an hour; debug only with ``quiet``, for checks
+    that run again later, such as validating an experiment) and return ``cost``."""
     avail = available_memory_bytes() if available is None else int(available)
     if not math.isfinite(cost.memory_bytes) or cost.memory_bytes > MEMORY_FRACTION * avail:
         raise ConfigError(f"{what}: {cost.items} need at least {human_bytes(cost.memory_bytes)} of memory, more than "
                           f"the {human_bytes(avail)} available on this machine; {fix}.")
+    if quiet:
+        log.debug("estimate for %s: %s", what, cost)
+        return cost
     log.info("estimate for %s: %s", what, cost)
     if cost.seconds > 3600:
         log.warning("%s will take long: %s (Ctrl-C stops it; finished stages are kept)", what, cost)

@@ -24,7 +24,9 @@ import pytest
 from mitpiv.cli import main
 from mitpiv.grid import VoxelGrid
 from mitpiv.io import write_exr, write_particles_ply, write_truth, write_volume
+from mitpiv.lightfield import LightField
 from mitpiv.physics.camera import PinholeCamera
+from mitpiv.physics.plenoptic import PlenopticCamera
 
 ROOT = Path(__file__).resolve().parents[1]
 GRID = VoxelGrid((0.0, 0.0, 0.0), (0.1, 0.1, 0.1), (8, 8, 8))
@@ -40,7 +42,17 @@ def files(tmp_path_factory) -> dict:
     img[10:13, 10:13] = 1.0
     for frame in (0, 1):
         meta = {"camera": cam.to_dict(), "sensor_id": "cam0", "frame": frame}
-        f[f"img{frame}"] = str(write_exr(d / f"cam0_frame{frame:03d}.exr", img, meta))
+        f[f"img{frame}"] = str(write_exr(d / f"cam0_frame{frame:03d}.exr", np.roll(img, frame, axis=1), meta))
+    cam1 = PinholeCamera((24, 24), 50.0, 10.0, position_mm=(5.0, 0.0, -500.0))
+    f["img_cam1_f1"] = str(write_exr(d / "cam1_frame001.exr", img, {"camera": cam1.to_dict(), "sensor_id": "cam1",
+                                                                     "frame": 1}))
+    # a tiny light field (3 x 3 views of 8 x 8 samples) with its plenoptic optics
+    optics = PlenopticCamera(resolution=(40, 40), pixel_pitch_um=5.0, focal_length_mm=50.0, f_number=4.0,
+                             focus_distance_mm=250.0, mla_pitch_um=25.0)
+    lf = LightField(data=np.ones((3, 3, 8, 8), np.float32), s_px=np.arange(8.0) * 5 + 2.5,
+                    t_px=np.arange(8.0) * 5 + 2.5, du_px=np.array([-1.0, 0.0, 1.0]), view_weights=np.ones((3, 3)),
+                    valid=np.ones((8, 8), bool), optics=optics)
+    f["lf"] = str(lf.save(d / "lf.npz"))
     f["rgb"] = str(write_exr(d / "rgb.exr", np.stack([img, 0.5 * img, 0.1 * img], -1), {"camera": cam.to_dict()}))
     pts = np.random.default_rng(0).uniform(0.1, 0.7, (20, 3))
     f["truth"] = str(write_truth(d / "truth.npz", positions_mm=[pts, pts + 0.01], times_s=[0.0, 0.01],
@@ -60,6 +72,7 @@ def files(tmp_path_factory) -> dict:
         np.savez(fh, positions_mm=np.array([{"a": 1}], dtype=object), times_s=np.zeros(1))
     np.save(d / "single.npy", np.zeros(3))
     shutil.copy(d / "single.npy", d / "single.npz")
+    shutil.copy(f["img0"], d / "copy.exr")
     with open(d / "badmeta.npz", "wb") as fh:
         np.savez(fh, volume=np.zeros(GRID.shape), meta=np.array("{not json"))
     with open(d / "volnogrid.npz", "wb") as fh:
@@ -81,6 +94,13 @@ def files(tmp_path_factory) -> dict:
     f["exp"] = str(exp / "experiment.toml")
     f["exp_text"] = (exp / "experiment.toml").read_text()
     f["scene"] = str(exp / "scene.xml")
+    # studies over it: a typo in a point key, in a scene parameter, a bad workers count
+    for name, body in {"study_typo": '[[points]]\n"reconstruction.iteration" = 3\n',
+                       "study_param": '[[points]]\n"scene.params.resolutoin" = 64\n',
+                       "study_workers": 'workers = -1\n[[points]]\n"reconstruction.iterations" = 3\n',
+                       "study_grid_str": '[grid]\n"piv.overlap" = ["0.5", 0.25]\n'}.items():
+        (exp / f"{name}.toml").write_text(f'name = "{name}"\nexperiment = "experiment.toml"\n{body}')
+        f[name] = str(exp / f"{name}.toml")
     return f
 
 
@@ -136,7 +156,11 @@ CASES = [
     C("refocus-frac-planes", "refocus {img0} --out {out}/s.npy --z-range -1 1 2.5", "--z-range"),
     C("refocus-zero-planes", "refocus {img0} --out {out}/s.npy --z-range -1 1 0", "--z-range"),
     C("refocus-nan-z", "refocus {img0} --out {out}/s.npy --z nan", "--z"),
-    C("refocus-huge-planes", "refocus {img0} --out {out}/s.npy --z-range -1 1 1e12", "--z-range"),
+    C("refocus-huge-planes", "refocus {lf} --out {out}/s.npy --z-range -1 1 1e12", "planes"),
+    C("refocus-lf-out-npz", "refocus {lf} --out {out}/s.npz --z 0", "--out"),
+    C("refocus-no-z", "refocus {lf} --out {out}/s.npy", "--z"),
+    C("refocus-lf-empty", "refocus {dir}/empty.npz --out {out}/s.npy --z 0", "empty.npz"),
+    C("refocus-lf-is-volume", "refocus {vol} --out {out}/s.npy --z 0", "vol.npz"),
     # --- reconstruct
     C("reconstruct-iter-neg", RECON + " --iterations -1", "--iterations"),
     C("reconstruct-iter-huge", RECON + " --iterations 100000000000", "--iterations"),
@@ -154,7 +178,17 @@ CASES = [
       "--voxel-mm 0.01", "memory"),
     C("reconstruct-same-image", "reconstruct {img0} {img0} {img0} {img0} --out {out}/v.npz --bounds 0 0.8 0 0.8 "
       "0 0.8 --voxel-mm 0.1", "same"),
-    C("reconstruct-mixed-frames", RECON, "frame"),
+    C("reconstruct-mixed-frames", "reconstruct {img0} {img_cam1_f1} --out {out}/v.npz --bounds 0 0.8 0 0.8 0 0.8 "
+      "--voxel-mm 0.1", "frame"),
+    C("reconstruct-same-pixels", "reconstruct {img0} {dir}/copy.exr --out {out}/v.npz --bounds 0 0.8 0 0.8 0 0.8 "
+      "--voxel-mm 0.1", "same image"),
+    C("reconstruct-rgb", "reconstruct {img0} {rgb} --out {out}/v.npz --bounds 0 0.8 0 0.8 0 0.8 --voxel-mm 0.1",
+      "rgb.exr"),
+    C("reconstruct-voxel-text", "reconstruct {img0} --out {out}/v.npz --bounds 0 0.8 0 0.8 0 0.8 --voxel-mm a",
+      "--voxel-mm"),
+    C("reconstruct-voxel-3-commas", "reconstruct {img0} --out {out}/v.npz --bounds 0 0.8 0 0.8 0 0.8 "
+      "--voxel-mm 0.1,0.1", "--voxel-mm"),
+    C("reconstruct-method", RECON + " --method marts", "--method"),
     C("reconstruct-mu", RECON.replace("{img1}", "") + " --mu 2.5", "--mu"),
     C("reconstruct-rays", RECON.replace("{img1}", "") + " --rays-per-pixel 0", "--rays-per-pixel"),
     C("reconstruct-frame-neg", RECON.replace("{img1}", "") + " --truth {truth} --frame -1", "--frame"),
@@ -187,7 +221,10 @@ CASES = [
     C("piv-windows-neg", PIV + " --windows -8", "--windows"),
     C("piv-overlap-1", PIV + " --overlap 1.0", "--overlap"),
     C("piv-overlap-nan", PIV + " --overlap nan", "--overlap"),
-    C("piv-overlap-huge-cost", PIV + " --windows 4 --overlap 0.99", "overlap"),
+    C("piv-windows-2d", PIV + " --windows 16x16", "--windows"),
+    C("piv-threshold-neg", PIV + " --threshold -1", "--threshold"),
+    C("piv-truth-frame-last", PIV + " --windows 4 --truth {truth} --frame 1", "--frame"),
+    C("piv-out-txt", "piv {vol} {vol_b} --out {out}/f.txt", "--out"),
     C("piv-dt-neg", PIV + " --dt-s -1", "--dt-s"),
     C("piv-frame-neg", PIV + " --windows 4 --truth {truth} --frame -1", "--frame"),
     C("piv-truth-nokey", PIV + " --windows 4 --truth {dir}/nokey.npz", "times_s"),
@@ -201,6 +238,11 @@ CASES = [
     C("sweep-workers-zero", "sweep {exp} --out {out}/s --workers 0", "--workers"),
     C("sweep-scheduler-dead", "sweep {exp} --out {out}/s --scheduler tcp://127.0.0.1:1", "--scheduler"),
     C("sweep-scheduler-junk", "sweep {exp} --out {out}/s --scheduler notanaddress", "--scheduler"),
+    C("sweep-point-typo", "sweep {study_typo} --out {out}/s", "iteration"),
+    C("sweep-point-param-typo", "sweep {study_param} --out {out}/s", "resolutoin"),
+    C("sweep-study-workers", "sweep {study_workers} --out {out}/s", "workers"),
+    C("sweep-grid-string", "sweep {study_grid_str} --out {out}/s", "overlap"),
+    C("sweep-study-missing", "sweep {dir}/nostudy.toml --out {out}/s", "nostudy.toml"),
     # --- the experiment (TOML) tables, through --check and --set
     C("toml-typo-seeding", RUN, "cont", [("count = 12000", "cont = 12000")]),
     C("toml-typo-flow", RUN, "ring_radius", [("ring_radius_mm", "ring_radius")]),
@@ -227,7 +269,15 @@ CASES = [
     C("toml-diameter-bool", RUN + " --set seeding.diameter_um=true", "diameter_um"),
     C("toml-voxel-huge-volume", RUN + " --set reconstruction.voxel_mm=0.0001", "voxel"),
     C("toml-iterations-huge", RUN + " --set reconstruction.iterations=100000000000", "iterations"),
-    C("toml-overlap-cost", RUN + " --set piv.overlap=0.999 --set piv.windows=[4]", "overlap"),
+    C("toml-scene-param-typo", RUN + " --set scene.params.resolutin=64", "resolutin"),
+    C("toml-box-inverted", RUN + " --set seeding.box_max_mm=[-30.0,20.0,4.0]", "box_max_mm"),
+    C("toml-two-densities", RUN + " --set seeding.ppp=0.05", "count"),
+    C("toml-method", RUN + " --set reconstruction.method=marts", "method"),
+    C("toml-flow-kind", RUN + " --set flow.kind=tornado", "kind"),
+    C("toml-date", RUN, "seed", [("seed = 0", "seed = 1979-05-27")]),
+    C("toml-windows-small", RUN + " --set piv.windows=[2]", "windows"),
+    C("toml-sensor-bitdepth", RUN + " --set sensor.bit_depth=9", "bit_depth"),
+    C("toml-render-sensors-empty", RUN + " --set render.sensors=[]", "sensors"),
     C("toml-nan", RUN + " --set flow.dt_s=nan", "dt_s"),
     C("toml-inf", RUN + " --set seeding.diameter_um=inf", "diameter_um"),
     C("toml-center-nan", RUN + " --set flow.center=[nan,0.0,0.0]", "center"),
@@ -238,6 +288,10 @@ CASES = [
     # typed flags of mitpiv run
     C("run-iterations-neg", RUN + " --iterations -3", "iterations"),
     C("run-voxel-zero", RUN + " --voxel-mm 0", "voxel_mm"),
+    C("run-spp-text", RUN + " --spp many", "--spp"),
+    C("run-no-out", "run {exp}", "--out"),
+    C("unknown-verb", "frobnicate", "frobnicate"),
+    C("no-verb", "", "command"),
 ]
 
 
@@ -262,7 +316,7 @@ def test_bad_input_is_one_clear_line(case, files, tmp_path, capsys):
         exp = Path(files["exp"]).with_name(f"{case.id}.toml")
         exp.write_text(text)
         argv = [str(exp) if a == files["exp"] else a for a in argv]
-    before = _listing(files["dir"], out)
+    before = _listing(files["dir"], out) - {Path(files["exp"]).with_name(f"{case.id}.toml")}
     rc = main(argv)
     err = capsys.readouterr().err
     assert rc == 2, (rc, err)

@@ -244,12 +244,18 @@ def validate(model: type[BaseModel], raw: Mapping, *, source: str = "experiment"
     :class:`ConfigError`. Strict: ``"0.1"`` is not a number, ``2.5`` or ``true`` not an
     integer, ``1`` not a boolean; an integer is a valid number."""
 
-    def not_json(value):
-        raise ConfigError(f"{source}: the value {value!r} ({type(value).__name__}) is neither a number, a string, a "
-                          f"boolean, an array nor a table; dates and times are not experiment values.")
+    def plain(value, where: str):
+        if isinstance(value, Mapping):
+            return {k: plain(v, f"{where}.{k}" if where else str(k)) for k, v in value.items()}
+        if isinstance(value, list | tuple):
+            return [plain(v, f"{where}[{i}]") for i, v in enumerate(value)]
+        if value is None or isinstance(value, str | int | float | bool):
+            return value
+        raise ConfigError(f"{source}: {where} = {value!r} is a {type(value).__name__}; experiment values are "
+                          f"numbers, strings, booleans, arrays or tables (no dates or times).")
 
     try:
-        text = json.dumps(dict(raw), default=not_json, allow_nan=True)
+        text = json.dumps(plain(raw, ""), allow_nan=True)
         return model.model_validate_json(text, strict=True)
     except ValidationError as e:
         raise ConfigError(format_errors(e, model, raw, source=source)) from None

@@ -112,7 +112,7 @@ class SeedingTable(Table):
             from mitpiv import costs
 
             costs.check_memory(costs.particles_cost(self.count), what=f"count = {self.count}",
-                               fix="seed fewer particles (count, concentration_per_mm3 or ppp)")
+                               fix="seed fewer particles (count, concentration_per_mm3 or ppp)", quiet=True)
         return self
 
 
@@ -185,7 +185,7 @@ class ReconstructionTable(Table):
         n = math.prod((b[2 * i + 1] - b[2 * i]) / vox[i] for i in range(3))
         costs.check_memory(costs.reconstruction_cost(n, iterations=self.iterations, method=self.method),
                            what=f"voxel_mm = {self.voxel_mm} on bounds_mm = {list(b)}",
-                           fix="use larger voxels or smaller bounds")
+                           fix="use larger voxels or smaller bounds", quiet=True)
         return self
 
 
@@ -225,7 +225,7 @@ class _Experiment(Table):
         costs.check_memory(costs.piv_cost(shape, self.piv.windows, self.piv.overlap),
                            what=f"[piv] windows = {list(self.piv.windows)}, overlap = {self.piv.overlap} on a "
                                 f"{shape[2]}x{shape[1]}x{shape[0]} grid",
-                           fix="use a smaller overlap or larger windows")
+                           fix="use a smaller overlap or larger windows", quiet=True)
         return self
 
 
