@@ -749,7 +749,7 @@ def main(argv=None) -> int:
     from tqdm.contrib.logging import logging_redirect_tqdm
 
     try:
-        with logging_redirect_tqdm(loggers=[logging.getLogger("mitpiv")]):  # messages print above the bars
+        with logging_redirect_tqdm(loggers=[logging.root]):  # messages print above the bars (once: via the root)
             return args.func(args)
     except (MitpivError, _UsageError) as e:
         print(f"mitpiv: error: {e}", file=sys.stderr)

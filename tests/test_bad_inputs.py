@@ -43,9 +43,10 @@ def files(tmp_path_factory) -> dict:
     for frame in (0, 1):
         meta = {"camera": cam.to_dict(), "sensor_id": "cam0", "frame": frame}
         f[f"img{frame}"] = str(write_exr(d / f"cam0_frame{frame:03d}.exr", np.roll(img, frame, axis=1), meta))
-    cam1 = PinholeCamera((24, 24), 50.0, 10.0, position_mm=(5.0, 0.0, -500.0))
-    f["img_cam1_f1"] = str(write_exr(d / "cam1_frame001.exr", img, {"camera": cam1.to_dict(), "sensor_id": "cam1",
-                                                                     "frame": 1}))
+    cam1 = PinholeCamera((24, 24), 50.0, 10.0, position_mm=(0.5, 0.0, -500.0))
+    for frame in (0, 1):
+        f[f"img_cam1_f{frame}"] = str(write_exr(d / f"cam1_frame{frame:03d}.exr", img, {
+            "camera": cam1.to_dict(), "sensor_id": "cam1", "frame": frame}))
     # a tiny light field (3 x 3 views of 8 x 8 samples) with its plenoptic optics
     optics = PlenopticCamera(resolution=(40, 40), pixel_pitch_um=5.0, focal_length_mm=50.0, f_number=4.0,
                              focus_distance_mm=250.0, mla_pitch_um=25.0)
@@ -326,3 +327,102 @@ def test_bad_input_is_one_clear_line(case, files, tmp_path, capsys):
     assert case.names in err, err
     after = _listing(files["dir"], out) - {Path(files["exp"]).with_name(f"{case.id}.toml")}
     assert after == before, sorted(map(str, after - before))
+
+
+# ------------------------------------------------------------- estimates and saturation
+def test_long_runs_log_their_estimate_and_legal_costs_pass(files, tmp_path, capsys):
+    """PIV at overlap 0.9 on 4-voxel windows is legal: it runs, and the log says up front
+    how many vectors and how long (the fuzz run's 'overlap 0.99 without an estimate')."""
+    out = tmp_path / "f.npz"
+    assert main(["piv", files["vol"], files["vol_b"], "--out", str(out), "--windows", "4", "--overlap", "0.9"]) == 0
+    err = capsys.readouterr().err
+    assert "estimate for piv: --windows 4 --overlap 0.9" in err and "vectors" in err and out.is_file()
+    # the experiment check says it too (at debug level: validation runs again when the run starts)
+    assert main(["-v", "run", files["exp"], "--check", "--set", "piv.overlap=0.95", "--set", "piv.windows=[4]"]) == 0
+    assert "vectors per pass" in capsys.readouterr().err
+
+
+def test_piv_vector_count_matches_enumeration():
+    from mitpiv import costs
+
+    for shape, w, ov in [((40, 33, 17), 8, 0.5), ((64, 64, 64), 16, 0.75), ((10, 10, 10), 4, 0.99), ((5, 5, 5), 8, 0.0)]:
+        step = max(1, round(w * (1 - ov)))
+        # independent count: every window start whose window fits in the axis
+        expected = np.prod([len(range(0, n - w + 1, step)) for n in shape])
+        assert costs.piv_vectors(shape, w, ov) == expected
+
+
+def test_memory_refusal_names_knob_estimate_and_fix():
+    from mitpiv import costs
+    from mitpiv.errors import ConfigError
+
+    c = costs.reconstruction_cost(1e9, n_images=4, iterations=5)
+    assert c.memory_bytes == 13e9  # 13 bytes per voxel: float32 volume + float64 copy + mask
+    with pytest.raises(ConfigError, match=r"--voxel-mm 0.01: 1 G voxels .* need at least 12.1 GiB .* 1 GiB available.*"
+                                          r"larger voxels"):
+        costs.check_memory(c, what="--voxel-mm 0.01", fix="use larger voxels", available=2**30)
+    assert costs.check_memory(c, what="x", fix="y", available=2**40) is c
+    assert costs.available_memory_bytes() > 0
+
+
+def test_shot_noise_saturates_instead_of_overflowing(files, tmp_path, capsys):
+    """An exposure so large that the Poisson mean passes NumPy's limit (~9e18) saturates at
+    the full well (and the ADC's top code), as a sensor does, instead of raising."""
+    from mitpiv.imaging import SensorModel, apply_sensor
+    from mitpiv.io import read_exr
+
+    img = np.zeros((8, 8))
+    img[2:5, 2:5] = 1.0
+    img[6, 6] = 1e-30  # a pixel far below saturation keeps its shot noise (mean 1e-5 e-: 0)
+    counts = apply_sensor(img, SensorModel(exposure=1e25, shot_noise=True, full_well_e=2e4, bit_depth=16), seed=3)
+    assert np.all(counts[2:5, 2:5] == 20000) and counts[0, 0] == 0 and counts[6, 6] == 0
+    counts = apply_sensor(img, SensorModel(exposure=1e25, shot_noise=True, bit_depth=12), seed=3)
+    assert np.all(counts[2:5, 2:5] == 4095)  # no full well: the ADC clips
+    assert main(["sensor", files["img0"], "--out", str(tmp_path), "--exposure", "1e25", "--shot-noise",
+                 "--full-well", "20000", "--bit-depth", "16", "--format", "exr"]) == 0
+    out, _ = read_exr(tmp_path / "cam0_frame000.exr")
+    assert out.max() == 20000 and "Traceback" not in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------ Ctrl-C
+def test_ctrl_c_exits_130_in_one_line_and_leaves_no_partial_file(files, tmp_path, capsys, monkeypatch):
+    import mitpiv.analysis
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(mitpiv.analysis, "piv3d", interrupted)
+    assert main(["piv", files["vol"], files["vol_b"], "--out", str(tmp_path / "f.npz"), "--windows", "4"]) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("mitpiv: interrupted (Ctrl-C) during 'piv'") and not any("Traceback" in ln for ln in err)
+    assert all(ln.startswith("estimate for piv") for ln in err[:-1]), err  # the estimate, logged before the work
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_ctrl_c_during_a_real_reconstruction(files, tmp_path):
+    """SIGINT to a running ``mitpiv reconstruct`` (10 000 MART iterations): exit status 130,
+    one line, no traceback, no volume and no temporary file left."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "v.npz"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "mitpiv.cli", "reconstruct", files["img0"], files["img_cam1_f0"], "--out", str(out), "--bounds", "0", "0.8", "0", "0.8", "0", "0.8",
+        "--voxel-mm", "0.02", "--iterations", "10000"], stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    seen = ""
+    t0 = time.monotonic()
+    while "estimate for reconstruct" not in seen and time.monotonic() - t0 < 120:
+        line = proc.stderr.readline()
+        if not line:
+            break
+        seen += line
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    err = seen + proc.stderr.read()
+    rc = proc.wait(timeout=60)
+    assert rc == 130, err
+    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("mitpiv: interrupted"), err
+    assert list(tmp_path.iterdir()) == []
