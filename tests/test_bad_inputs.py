@@ -426,3 +426,58 @@ def test_ctrl_c_during_a_real_reconstruction(files, tmp_path):
     assert rc == 130, err
     assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("mitpiv: interrupted"), err
     assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------ plugins and scene files
+FILM = {"type": "hdrfilm", "width": 16, "height": 16, "pixel_format": "luminance"}
+
+
+@pytest.mark.parametrize("plugin, match", [
+    ({"type": "distorted_pinhole", "focal_length_mm": 50.0, "pixel_pitch_um": 10.0, "principal_point_x_px": float("nan"),
+      "film": FILM}, "'principal_point_x_px' must be a finite number"),
+    ({"type": "distorted_pinhole", "focal_length_mm": 50.0, "pixel_pitch_um": 10.0, "k1": float("inf"), "film": FILM},
+     "'k1' must be a finite number"),
+    ({"type": "mie", "diameter_um": 1.0, "index": 1.5, "index_imag": 1000.0}, "absorption index k = 1000"),
+    ({"type": "mie", "diameter_um": float("nan"), "index": 1.5}, "'diameter_um' must be a finite number"),
+    ({"type": "plenoptic", "pixel_pitch_um": 5.5, "focal_length_mm": 50.0, "f_number": 2.8, "focus_distance_mm": 250.0,
+      "mla_pitch_um": 55.0, "mla_offset_x_um": 5000.0,
+      "film": FILM | {"width": 160, "height": 160, "rfilter": {"type": "box"}}},
+     "'mla_offset_um' .* moves the MLA centre off the sensor"),
+], ids=["pinhole-principal-point-nan", "pinhole-k1-inf", "mie-absorption-1000", "mie-diameter-nan",
+        "plenoptic-mla-offset"])
+def test_plugin_parameters_are_checked(plugin, match):
+    from mitpiv.errors import ConfigError
+    from mitpiv.render.scene import load_dict
+
+    with pytest.raises(ConfigError, match=match):
+        load_dict(plugin)
+
+
+def test_mie_index_below_one_warns():
+    """n < 1 with little absorption is no dielectric at optical wavelengths, but a metal has
+    n < 1 (with k > 1) and a relative index below 1 is a bubble: a warning, not an error."""
+    from mitpiv.errors import MitpivWarning
+    from mitpiv.render.scene import load_dict
+
+    with pytest.warns(MitpivWarning, match="'index' = 0.9 .* below 1"):
+        load_dict({"type": "mie", "diameter_um": 1.0, "index": 0.9, "angles": 64})
+    load_dict({"type": "mie", "diameter_um": 0.5, "index": 0.2, "index_imag": 3.0, "angles": 64})  # silver-like: no warning
+
+
+def test_particle_files_with_nan_or_huge_proxies(files, tmp_path, capsys):
+    """A PLY with a NaN position is refused before rendering (one line, exit 2, nothing
+    written); proxies as large as the particle cloud are legal (images do not depend on the
+    proxy radius) and warned about."""
+    from mitpiv.errors import MitpivWarning
+    from mitpiv.render.scene import load_scene
+
+    shutil.copy(files["scene"], tmp_path / "scene.xml")
+    shutil.copy(files["nan_ply"], tmp_path / "particles_0.ply")
+    out = tmp_path / "out"
+    assert main(["render", str(tmp_path / "scene.xml"), "--out", str(out), "--frames", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "particles_0.ply" in err and "non-finite position" in err and "\n" not in err and not out.exists()
+    pts = np.random.default_rng(1).uniform(-0.5, 0.5, (10, 3))
+    write_particles_ply(tmp_path / "particles_0.ply", pts, 1.0, proxy_radius_mm=2.0)
+    with pytest.warns(MitpivWarning, match="proxy radius 2 mm is at least half the extent"):
+        load_scene(tmp_path / "scene.xml", frame=0)
