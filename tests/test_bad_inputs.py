@@ -481,3 +481,174 @@ def test_particle_files_with_nan_or_huge_proxies(files, tmp_path, capsys):
     write_particles_ply(tmp_path / "particles_0.ply", pts, 1.0, proxy_radius_mm=2.0)
     with pytest.warns(MitpivWarning, match="proxy radius 2 mm is at least half the extent"):
         load_scene(tmp_path / "scene.xml", frame=0)
+
+
+# ------------------------------------------------------------------ property-based tests
+# Hypothesis draws inputs; each property: finite inputs in the documented range give finite
+# outputs, anything else a ConfigError (never another exception, never a silent acceptance).
+# max_examples stays small: the whole file runs in well under a minute.
+from hypothesis import HealthCheck, example, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+PROPS = settings(max_examples=25, deadline=None, database=None,
+                 suppress_health_check=[HealthCheck.function_scoped_fixture])
+ANY_VALUE = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-2**70, 2**70), st.booleans(),
+                      st.text(max_size=4), st.lists(st.floats(-10, 10), max_size=3))
+
+#: Numeric experiment fields, their type and the documented range (lo, hi, lo_open, hi_open).
+SCHEMA_FIELDS = {
+    "reconstruction.voxel_mm": (float, 0, None, True, False),
+    "reconstruction.iterations": (int, 1, 10_000, False, False),
+    "reconstruction.mu": (float, 0, 2, True, True),
+    "piv.overlap": (float, 0, 1, False, True),
+    "piv.threshold": (float, 0, None, True, False),
+    "particles.threshold_rel": (float, 0, 1, True, True),
+    "particles.radius_voxels": (float, 0, None, True, False),
+    "flow.dt_s": (float, 0, None, True, False),
+    "seeding.diameter_um": (float, 0, None, True, False),
+    "seeding.count": (int, 0, None, False, False),
+    "seed": (int, 0, 2**63 - 1, False, False),
+}
+
+
+def _in_range(v, kind, lo, hi, lo_open, hi_open):
+    if isinstance(v, bool) or not isinstance(v, int | float) or (kind is int and not isinstance(v, int)):
+        return False
+    if not np.isfinite(v):
+        return False
+    return not ((lo is not None and (v < lo or (lo_open and v == lo))) or
+                (hi is not None and (v > hi or (hi_open and v == hi))))
+
+
+@PROPS
+@given(key=st.sampled_from(sorted(SCHEMA_FIELDS)), value=ANY_VALUE)
+@example(key="reconstruction.voxel_mm", value="0.1")  # the fuzz run's silent acceptances
+@example(key="reconstruction.iterations", value=2.5)
+@example(key="seed", value=True)
+@example(key="piv.overlap", value=float("nan"))
+@example(key="seeding.diameter_um", value=float("inf"))
+@example(key="seeding.count", value=10**12)
+@example(key="reconstruction.voxel_mm", value=1e-5)
+@example(key="reconstruction.iterations", value=10_000)
+def test_schema_numeric_fields_accept_exactly_their_range(files, key, value):
+    from mitpiv.errors import ConfigError
+    from mitpiv.studies import load_experiment
+
+    kind, *rng = SCHEMA_FIELDS[key]
+    ok = _in_range(value, kind, *rng)
+    try:
+        cfg = load_experiment(files["exp"], {key: value})
+    except ConfigError as e:
+        msg = str(e)
+        # refused: in range only for a cost the machine cannot hold (tiny voxels, huge counts)
+        assert not ok or "memory" in msg, (key, value, msg)
+        assert key.split(".")[-1] in msg or "memory" in msg, msg
+        return
+    assert ok, (key, value)
+    node = cfg
+    for part in key.split("."):
+        node = getattr(node, part)
+    assert node == value and type(node) is kind or (kind is float and isinstance(value, int))
+
+
+@PROPS
+@given(p=st.tuples(st.floats(-1e3, 1e3), st.floats(-1e3, 1e3), st.floats(1.0, 1e4)),
+       k1=st.floats(-0.2, 0.2), pp=st.tuples(st.floats(-100, 100), st.floats(-100, 100)))
+def test_camera_projection_is_finite_in_front(p, k1, pp):
+    from mitpiv.errors import ConfigError
+    from mitpiv.physics.camera import PinholeCamera
+    from mitpiv.physics.distortion import Distortion
+
+    try:
+        cam = PinholeCamera((64, 48), 25.0, 5.0, principal_point_px=(32 + pp[0], 24 + pp[1]), distortion=Distortion(k1=k1))
+    except ConfigError:
+        return
+    uv = cam.project(cam.position_mm + cam.rotation.T @ np.asarray(p))  # p: camera frame, z > 0 in front
+    assert np.all(np.isfinite(uv))
+
+
+@PROPS
+@given(k=st.tuples(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5), st.floats(-0.01, 0.01), st.floats(-0.01, 0.01)),
+       uv=st.tuples(st.floats(0, 1000), st.floats(0, 800)))
+def test_distortion_inverse_is_finite_and_exact_where_valid(k, uv):
+    """Where check_distortion accepts a distortion, undistort inverts distort to its
+    tolerance (1e-6 px at 2000 px focal length) over the image; otherwise a ConfigError."""
+    from mitpiv.errors import ConfigError
+    from mitpiv.physics.distortion import Distortion, check_distortion, distort, undistort
+
+    d = Distortion(k1=k[0], k2=k[1], p1=k[2], p2=k[3])
+    f, c = 2000.0, (500.0, 400.0)
+    try:
+        n = check_distortion(d, resolution=(1000, 800), focal_px=f, principal_point_px=c)
+    except ConfigError:
+        return
+    xd, yd = (uv[0] - c[0]) / f, (uv[1] - c[1]) / f
+    x, y = undistort(np.float64(xd), np.float64(yd), d, iterations=max(n, 1))
+    assert np.isfinite(x) and np.isfinite(y)
+    bx, by = distort(x, y, d)
+    assert abs(bx - xd) * f < 1e-5 and abs(by - yd) * f < 1e-5  # 10x check_distortion's 1e-6 px tolerance
+
+
+@PROPS
+@given(d=st.floats(0.05, 20.0), n=st.floats(1.01, 3.0), k=st.one_of(st.just(0.0), st.floats(0, 5), st.floats(100, 1e4)),
+       medium=st.floats(1.0, 1.5))
+def test_mie_efficiencies_finite_or_config_error(d, n, k, medium):
+    from mitpiv.errors import ConfigError
+    from mitpiv.physics import mie
+
+    try:
+        e = mie.efficiencies(d, complex(n, k), wavelength_nm=532.0, n_medium=medium)
+    except ConfigError:
+        assert k > mie.MAX_ABSORPTION_INDEX or abs(n / medium - 1) < 1e-5
+        return
+    assert k <= mie.MAX_ABSORPTION_INDEX
+    for q in (e.qext, e.qsca):
+        assert np.isfinite(q) and q > 0
+    assert e.qabs >= -1e-9 * e.qext  # non-negative up to rounding
+
+
+@settings(max_examples=8, deadline=None, database=None)
+@given(f_number=st.floats(1.4, 32.0), pitch=st.floats(2.0, 20.0), defocus=st.floats(-1.0, 1.0),
+       spherical=st.floats(-0.3, 0.3), offset=st.tuples(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5)))
+def test_psf_is_finite_and_a_fraction_of_the_energy(f_number, pitch, defocus, spherical, offset):
+    from mitpiv.errors import ConfigError
+    from mitpiv.physics.psf import psf
+
+    try:
+        k = psf(f_number=f_number, pixel_pitch_um=pitch, defocus_waves=defocus, spherical_waves=spherical,
+                offset_px=offset, size_px=15)
+    except ConfigError:
+        return
+    assert np.all(np.isfinite(k)) and k.min() > -1e-9 and k.sum() <= 1 + 1e-9
+
+
+@settings(PROPS, max_examples=6)
+@given(z=st.lists(st.floats(-40.0, 40.0), min_size=1, max_size=3))
+def test_refocus_finite_or_config_error(files, z):
+    from mitpiv.errors import ConfigError
+    from mitpiv.lightfield import LightField, focal_stack
+
+    lf = LightField.load(files["lf"])
+    try:
+        stack = focal_stack(lf, z)
+    except ConfigError:
+        return
+    assert stack.shape[0] == len(z) and np.all(np.isfinite(stack))
+
+
+@settings(max_examples=10, deadline=None, database=None)
+@given(overlap=st.floats(0.0, 0.9), window=st.sampled_from([4, 6, 8]), seed=st.integers(0, 2**32 - 1),
+       shift=st.integers(0, 2))
+def test_piv_finite_or_config_error(overlap, window, seed, shift):
+    from mitpiv.analysis import piv3d
+    from mitpiv.errors import ConfigError
+
+    a = np.random.default_rng(seed).random((12, 12, 12)).astype(np.float32)
+    b = np.roll(a, shift, axis=2)
+    try:
+        f = piv3d(a, b, VoxelGrid((0.0, 0.0, 0.0), (0.1, 0.1, 0.1), (12, 12, 12)), windows=[window],
+                  overlap=overlap)
+    except ConfigError:
+        return
+    for c in (f.u, f.v, f.w):
+        assert np.all(np.isfinite(c[f.valid]))
