@@ -219,7 +219,6 @@ def cmd_sensor(args) -> int:
     from mitpiv.io.counts import write_counts
 
     out = _out_dir(args.out)
-
     model = SensorModel(
         exposure=args.exposure, peak_photons=args.peak_photons, quantum_efficiency=args.qe, shot_noise=args.shot_noise,
         dark_current_e_per_s=args.dark_current, exposure_time_s=args.exposure_time, full_well_e=args.full_well,
@@ -451,6 +450,12 @@ def cmd_piv(args) -> int:
         raise MitpivError(f"piv: the volumes lie on different grids ({grid.to_dict()} vs {grid_b.to_dict()}); "
                           f"reconstruct both frames on the same --bounds and --voxel.")
     windows = args.windows
+    nz, ny, nx = grid.shape
+    for w in windows:
+        wx, wy, wz = w if isinstance(w, tuple) else (w, w, w)
+        if wx > nx or wy > ny or wz > nz:
+            raise MitpivError(f"--windows {'x'.join(map(str, (wx, wy, wz)))} does not fit the volume of {nx}x{ny}x{nz} "
+                              f"voxels (x, y, z); give windows no larger than the volume.")
     costs.check_memory(costs.piv_cost(grid.shape, windows, args.overlap),
                        what=f"piv: --windows {' '.join(map(str, args.windows))} --overlap {args.overlap}",
                        fix="use a smaller --overlap or larger --windows")

@@ -391,12 +391,17 @@ def source_of(cfg) -> str:
 
 
 def stage_reconstruct(ctx: StageContext) -> dict:
+    from mitpiv import costs
     from mitpiv.io import write_volume
     from mitpiv.reconstruct.images import reconstruct_images
 
     cfg = ctx.cfg
     r = cfg.reconstruction
     grid = grid_of(cfg)
+    costs.check_memory(costs.reconstruction_cost(grid.n_voxels, n_images=len(list((ctx.run_dir / source_of(cfg)).glob("*_frame000.exr"))),
+                                                 iterations=r.iterations, method=r.method),
+                       what=f"[reconstruction] {r.method} on {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]} voxels, "
+                            f"per frame", fix="use larger voxels or smaller bounds")
     info = {}
     for frame in FRAMES:
         imgs, metas, _ = images(ctx.run_dir, frame, source_of(cfg))
@@ -447,6 +452,11 @@ def stage_piv(ctx: StageContext) -> dict:
     truth = read_truth(ctx.input("particles", "truth.npz"))
     dt = float(truth["times_s"][1] - truth["times_s"][0])
     pv = cfg.piv
+    from mitpiv import costs
+
+    costs.check_memory(costs.piv_cost(grid.shape, pv.windows, pv.overlap),
+                       what=f"[piv] windows = {list(pv.windows)}, overlap = {pv.overlap}",
+                       fix="use a smaller overlap or larger windows")
     field = analysis.piv3d(volume(ctx.run_dir, 0), volume(ctx.run_dir, 1), grid, windows=pv.windows,
                            overlap=pv.overlap, deform=pv.deform, interpolation=pv.interpolation,
                            normalised=pv.normalised, threshold=pv.threshold,
