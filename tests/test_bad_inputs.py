@@ -291,6 +291,10 @@ CASES = [
     C("run-voxel-zero", RUN + " --voxel-mm 0", "voxel_mm"),
     C("run-spp-text", RUN + " --spp many", "--spp"),
     C("run-no-out", "run {exp}", "--out"),
+    C("replicate-unknown", "replicate nosuchstudy --out {out}/r", "nosuchstudy"),
+    C("replicate-seed-neg", "replicate nosuchstudy --seed -1", "--seed"),
+    C("replicate-workers-zero", "replicate nosuchstudy --workers 0", "--workers"),
+    C("replicate-out-file", "replicate nosuchstudy --out {img0}", "--out"),
     C("unknown-verb", "frobnicate", "frobnicate"),
     C("no-verb", "", "command"),
 ]
