@@ -13,6 +13,7 @@ import argparse
 import json
 import logging
 import math
+import signal
 import sys
 
 from mitpiv.costs import MAX_ITERATIONS
@@ -238,7 +239,8 @@ def cmd_sensor(args) -> int:
         if (out / f"{path.stem}.{args.format}").is_dir():
             raise MitpivError(f"--out: {out / f'{path.stem}.{args.format}'} is a folder where the counts of {path} "
                               f"go; choose another --out folder.")
-    res = apply_sensor_set(images, model, seed=args.seed, progress=_progress(args))
+    # all-black output (e.g. no --exposure: radiance taken as photons rounds to 0) is refused
+    res = apply_sensor_set(images, model, seed=args.seed, progress=_progress(args), on_degenerate="raise")
     for key, (path, _, meta) in zip(keys, inputs, strict=True):
         target = out / f"{path.stem}.{args.format}"
         write_counts(target, res.counts[key], {**meta, "sensor_model": res.metadata(key)})
@@ -539,8 +541,13 @@ def cmd_sweep(args) -> int:
                    progress=_progress(args))
     ok = int((df["status"] == "ok").sum())
     print(f"{ok}/{len(df)} points ok -> {args.out}/results.csv, results.parquet")
-    for _, row in df[df["status"] != "ok"].iterrows():
+    failed = df[df["status"] != "ok"]
+    for _, row in failed.iterrows():
         print(f"  failed {row['point']}: {row['error']}")
+    if len(failed):  # a sweep with failed points is not a success (a rerun runs only those)
+        print(f"mitpiv: error: {len(failed)} of {len(df)} points failed (listed above); fix them and rerun the "
+              f"sweep: the finished points are kept.", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -788,16 +795,40 @@ def main(argv=None) -> int:
         logging.getLogger(noisy).setLevel(max(level, logging.WARNING))
     from tqdm.contrib.logging import logging_redirect_tqdm
 
+    previous = _stop_on_sigterm()
     try:
         with logging_redirect_tqdm(loggers=[logging.root]):  # messages print above the bars (once: via the root)
             return args.func(args)
     except (MitpivError, _UsageError) as e:
         print(f"mitpiv: error: {e}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"mitpiv: interrupted (Ctrl-C) during '{args.command}'; files and stages already finished are kept "
-              f"(nothing half-written is left); rerun the same command to resume.", file=sys.stderr)
-        return 130
+    except (KeyboardInterrupt, _Terminated) as e:
+        # the unwinding removed the unfinished stage's temporary files and released the lock
+        sig = "SIGTERM" if isinstance(e, _Terminated) else "Ctrl-C"
+        print(f"mitpiv: stopped by {sig}; finished stages are kept (a rerun resumes), temporary files were "
+              f"removed.", file=sys.stderr)
+        return 143 if isinstance(e, _Terminated) else 130
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+class _Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that every ``finally`` runs (temporary stage
+    folders and files are removed, the run folder's lock released)."""
+
+
+def _stop_on_sigterm():
+    """Turn SIGTERM into :class:`_Terminated` (main thread only); returns the old handler."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum, frame):
+        raise _Terminated()
+
+    return signal.signal(signal.SIGTERM, handler)
 
 
 if __name__ == "__main__":

@@ -24,6 +24,14 @@ class FileFormatError(MitpivError, ValueError):
     """A file exists but does not have the expected content."""
 
 
+class FolderLockedError(MitpivError, RuntimeError):
+    """A run or sweep folder is being written by another process (its lock is held)."""
+
+
+class DiskSpaceError(MitpivError, OSError):
+    """Not enough free disk space for a write."""
+
+
 class MitpivWarning(UserWarning):
     """Warning category for mitpiv."""
 

@@ -50,11 +50,30 @@ def write_npz(path, arrays: dict, *, compressed: bool = True, owner: str = "writ
             raise ConfigError(f"{owner}: entry {key!r} for {str(path)!r} is not a numeric or string array "
                               f"(dtype object); give a NumPy array or a JSON string.")
         entries[key] = a
-    save = np.savez_compressed if compressed else np.savez
-    with atomic_path(path, suffix=".npz") as tmp:
+    with atomic_path(path, suffix=".npz", size_bytes=sum(a.nbytes for a in entries.values())) as tmp:
         with open(tmp, "wb") as fh:
-            save(fh, **entries)
+            _savez(fh, entries, compressed)
     return path
+
+
+#: The zip time stamp of every entry: fixed, so that equal arrays give byte-identical files.
+_ZIP_DATE = (1980, 1, 1, 0, 0, 0)
+
+
+def _savez(fh, entries: dict, compressed: bool) -> None:
+    """``np.savez`` / ``np.savez_compressed`` (the same ``.npy`` entries, the same zip
+    layout that ``np.load`` reads), but with a fixed time stamp per entry instead of the
+    current time, so that a file's checksum depends on its content only (a run's stage
+    outputs are compared and keyed by checksum). Hand-written because NumPy's writer has no
+    time-stamp option; ``np.lib.format.write_array`` still writes each array."""
+    comp = zipfile.ZIP_DEFLATED if compressed else zipfile.ZIP_STORED
+    with zipfile.ZipFile(fh, mode="w", compression=comp, allowZip64=True) as zf:
+        for key, a in entries.items():
+            info = zipfile.ZipInfo(f"{key}.npy", date_time=_ZIP_DATE)
+            info.compress_type = comp
+            info.external_attr = 0o600 << 16
+            with zf.open(info, "w", force_zip64=True) as fid:
+                np.lib.format.write_array(fid, np.asanyarray(a), allow_pickle=False)
 
 
 def read_npz(path, *, what: str = "array file", required=()) -> dict:
@@ -118,7 +137,7 @@ def stack_output(shape, out=None, what: str = "stack"):
     path = Path(out)
     if path.suffix != ".npy":
         raise ConfigError(f"{what}: 'out' must be a .npy file, got {str(path)!r}.")
-    with atomic_path(path, suffix=".npy") as tmp:
+    with atomic_path(path, suffix=".npy", size_bytes=4 * math.prod(shape)) as tmp:
         arr = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=shape)
         try:
             yield arr

@@ -58,7 +58,7 @@ def write_exr(path, image, metadata: dict | None = None) -> Path:
         "type": OpenEXR.scanlineimage,
         METADATA_KEY: meta_json,
     }
-    with atomic_path(path, suffix=".exr") as tmp:
+    with atomic_path(path, suffix=".exr", size_bytes=img.nbytes + len(meta_json)) as tmp:
         with OpenEXR.File(header, channels) as f:
             f.write(str(tmp))
     return path

@@ -9,6 +9,7 @@ metric that could not be computed stays NaN rather than becoming a string.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path, PurePath
 
@@ -17,7 +18,7 @@ import numpy as np
 from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.io.atomic import atomic_path
 
-__all__ = ["to_jsonable", "json_default", "write_json", "read_json", "write_text"]
+__all__ = ["to_jsonable", "json_default", "write_json", "read_json", "write_text", "file_sha256"]
 
 
 def to_jsonable(obj):
@@ -105,3 +106,10 @@ def write_text(path, text: str) -> Path:
         with open(tmp, "w", encoding="utf-8") as fh:
             fh.write(text)
     return path
+
+
+def file_sha256(path) -> str:
+    """The hex SHA-256 of a file's content, read in a stream (constant memory): the
+    checksums of stage outputs and the content keys of input files."""
+    with open(path, "rb") as fh:
+        return hashlib.file_digest(fh, "sha256").hexdigest()

@@ -4,22 +4,38 @@ skipped on a rerun when its inputs did not change.
 
 A run folder holds ``experiment.json`` (the validated experiment), one sub-folder per stage
 (filled in ``.<stage>.tmp`` and renamed into place with its completion record
-``stage.json``: the stage key, its wall time and its result), and at the end
-``metrics.json`` (the kind's summary) and ``timings.json`` (seconds per stage), each written
-once and atomically.
+``stage.json``: the stage key, its wall time, its result and every output file with its
+SHA-256 and size), and at the end ``metrics.json`` (the kind's summary) and
+``timings.json`` (seconds per stage), each written once and atomically.
 
-Stage keys: a stage's key hashes the experiment tables it reads (with every default filled
-in) and the previous stage's key, so a changed setting reruns that stage and every stage
-after it. Timings are kept in memory and written once; a skipped stage reports the time it
-took when it ran.
+Stage keys (content keys): a stage's key hashes the experiment tables it reads (with every
+default filled in), the content (SHA-256) of every file outside the run folder that it
+reads (the scene XML and the files that it names), the output checksums of the earlier
+stages, the previous stage's key, the mitpiv version, and for stages that render the
+Mitsuba and Dr.Jit versions (read from the installed packages' metadata, without importing
+them). So an edited scene file, a changed setting or a changed upstream output reruns that
+stage and every stage after it, and nothing else.
+
+A stage counts as done only when its completion record lists its outputs and every one of
+them is there with its checksum: a stage folder with a missing or corrupt output reruns.
+
+One run at a time: the run folder is locked for the whole run
+(:func:`mitpiv.io.atomic.folder_lock`); a second run on it fails at once naming the PID,
+host and start time of the holder. Temporary files and stage folders that an interrupted
+run left behind are removed when the next run starts (under the lock).
+
+Timings are kept in memory and written once; a skipped stage reports the time it took when
+it ran.
 
 Experiment kinds (:mod:`mitpiv.studies.kinds`) plug in by declaring their schema, their
 stages (functions of a :class:`StageContext`: inputs from earlier stage folders, outputs
-into their own folder, a JSON result), their summary and their report.
+into their own folder, a JSON result; the files they read and the packages that shape
+their output), their summary and their report.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -37,12 +53,18 @@ from mitpiv.progress import Progress, bar
 from mitpiv.studies.schema import apply_overrides, read_toml, validate
 
 __all__ = ["Stage", "StageContext", "RunResult", "Kind", "load_experiment", "run_experiment", "run_config",
-           "run_stages", "check_experiment", "content_hash", "SCHEMA_VERSION"]
+           "run_stages", "check_experiment", "content_hash", "experiment_key", "stage_outputs", "SCHEMA_VERSION"]
 
 log = logging.getLogger(__name__)
 
 #: Part of every stage key: raise it when a change makes earlier stage folders invalid.
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
+
+#: The run's summary files: removed as soon as a stage (re)runs, written when all are done.
+SUMMARY_FILES = ("metrics.json", "timings.json")
+
+#: Packages whose version is part of the key of a stage that renders.
+RENDER_PACKAGES = ("mitsuba", "drjit")
 
 
 @dataclass(frozen=True)
@@ -52,11 +74,17 @@ class Stage:
     name : the stage folder's name.
     reads : the experiment's top-level keys (tables) whose values reach this stage.
     run : ``run(ctx) -> dict``: fills ``ctx.out`` and returns a JSON-ready result.
+    files : ``files(cfg) -> list of paths``: the files outside the run folder that the stage
+        reads (their content is part of its key); None: none.
+    packages : installed packages whose version shapes the stage's output (part of its key),
+        e.g. :data:`RENDER_PACKAGES` for a stage that renders.
     """
 
     name: str
     reads: tuple[str, ...]
     run: Callable[[StageContext], dict | None]
+    files: Callable[[BaseModel], list] | None = None
+    packages: tuple[str, ...] = ()
 
 
 @dataclass
@@ -164,6 +192,53 @@ def content_hash(obj, *, length: int = 16) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:length]
 
 
+@functools.cache
+def package_version(name: str) -> str:
+    """An installed distribution's version from its metadata (no import), or "not installed"."""
+    from importlib import metadata
+
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return "not installed"
+
+
+def _file_digests(paths, cache: dict) -> dict[str, str]:
+    from mitpiv.io.records import file_sha256
+
+    out = {}
+    for p in paths or ():
+        p = Path(p)
+        k = str(p)
+        if k not in cache:
+            cache[k] = file_sha256(p) if p.is_file() else "missing"
+        out[k] = cache[k]
+    return out
+
+
+def _static_part(cfg: BaseModel, data: dict, st: Stage, cache: dict) -> dict:
+    """What a stage's key holds besides the run's own history: its settings, the content of
+    the files it reads and the versions of the code that makes its output."""
+    from mitpiv.version import __version__
+
+    return {"stage": st.name, "settings": {t: data.get(t) for t in st.reads},
+            "files": _file_digests(st.files(cfg) if st.files is not None else (), cache),
+            "mitpiv": __version__, "packages": {n: package_version(n) for n in st.packages}}
+
+
+def experiment_key(cfg: BaseModel) -> str:
+    """The content key of a whole experiment: its resolved settings, the content of every
+    input file its stages read and the code versions (mitpiv, and Mitsuba/Dr.Jit where it
+    renders). Sweeps key their points on it: a changed base experiment or scene file
+    reruns them."""
+    from mitpiv.studies.kinds import get_kind
+
+    data = cfg.model_dump(mode="json")
+    cache: dict = {}
+    parts = [_static_part(cfg, data, st, cache) for st in get_kind(cfg.kind).stages(cfg)]
+    return content_hash([f"v{SCHEMA_VERSION}", data, parts])
+
+
 def _record(stage_dir: Path) -> dict | None:
     from mitpiv.io.records import read_json
 
@@ -171,61 +246,137 @@ def _record(stage_dir: Path) -> dict | None:
     if not f.is_file():
         return None
     try:
-        return read_json(f)
+        rec = read_json(f)
     except Exception:  # noqa: BLE001 - an unreadable record is an incomplete stage
         return None
+    return rec if isinstance(rec, dict) else None
+
+
+def stage_outputs(folder, *, fsync: bool = False) -> dict[str, dict]:
+    """Every file under a stage folder but its completion record: ``{relative path:
+    {"sha256": hex, "bytes": size}}`` (read in a stream; ``fsync``: also flush each to disk)."""
+    from mitpiv.io.records import file_sha256
+
+    folder = Path(folder)
+    out = {}
+    for f in sorted(p for p in folder.rglob("*") if p.is_file()):
+        rel = f.relative_to(folder).as_posix()
+        if rel == "stage.json":
+            continue
+        if fsync:
+            fd = os.open(f, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+        out[rel] = {"sha256": file_sha256(f), "bytes": f.stat().st_size}
+    return out
+
+
+def _verified(stage_dir: Path, key: str, name: str, run_name: str) -> dict | None:
+    """The completion record of a finished stage with this key whose outputs are all there
+    with their checksums; None (the stage reruns) otherwise, with the reason logged."""
+    from mitpiv.io.records import file_sha256
+
+    rec = _record(stage_dir)
+    if rec is None:
+        if stage_dir.exists():
+            log.info("[%s] %s: the folder has no readable completion record; the stage reruns", run_name, name)
+        return None
+    if rec.get("key") != key:
+        return None
+    outputs = rec.get("outputs")
+    if not isinstance(outputs, dict):
+        log.info("[%s] %s: its completion record lists no outputs (an older run); the stage reruns", run_name, name)
+        return None
+    for rel, info in outputs.items():
+        f = stage_dir / rel
+        try:
+            ok = f.is_file() and f.stat().st_size == info["bytes"] and file_sha256(f) == info["sha256"]
+        except (OSError, KeyError, TypeError):
+            ok = False
+        if not ok:
+            log.warning("[%s] %s: output %s is %s; the stage reruns", run_name, name, rel,
+                        "missing" if not f.is_file() else "changed or corrupt (checksum differs)")
+            return None
+    return rec
+
+
+def _clean(run: Path, stages: list[Stage]) -> None:
+    """Remove what an interrupted run left: temporary stage folders and files."""
+    from mitpiv.io.atomic import clean_temps
+
+    clean_temps(run)
+    for st in stages:
+        clean_temps(run / st.name)
 
 
 def run_stages(cfg: BaseModel, run_dir, stages: list[Stage], *, progress: Progress = None
                ) -> tuple[dict[str, dict], dict[str, float]]:
     """Run (or skip) each stage of ``stages`` into the run folder; returns (results, timings)
-    per stage. See the module notes for keys, records and atomic completion."""
+    per stage. See the module notes for keys, records, locking and atomic completion.
+
+    Raises :class:`~mitpiv.errors.FolderLockedError` when another process is running in
+    ``run_dir``.
+    """
+    from mitpiv.io.atomic import folder_lock, fsync_dir
     from mitpiv.io.records import write_json
 
     run = Path(run_dir)
-    run.mkdir(parents=True, exist_ok=True)
-    data = cfg.model_dump(mode="json")
-    write_json(run / "experiment.json", data)
-    name = data.get("name", "experiment")
-    results: dict[str, dict] = {}
-    timings: dict[str, float] = {}
-    prev = f"v{SCHEMA_VERSION}:{data.get('kind')}"
-    with bar(len(stages), desc=f"{name}", progress=progress, unit="stage") as b:
-        for st in stages:
-            prev = content_hash([prev] + [data.get(t) for t in st.reads])
-            final, tmp = run / st.name, run / f".{st.name}.tmp"
-            rec = _record(final)
-            b.set_description(f"{name}: {st.name}")
-            if rec is not None and rec.get("key") == prev:
-                log.info("[%s] %s: done earlier, skipped", name, st.name)
-                results[st.name] = rec.get("result") or {}
-                timings[st.name] = float(rec.get("seconds", 0.0))
-                b.update()
-                continue
-            log.info("[%s] %s ...", name, st.name)
-            shutil.rmtree(tmp, ignore_errors=True)
-            tmp.mkdir(parents=True)
-            t0 = time.perf_counter()
-            try:
-                ctx = StageContext(cfg=cfg, run_dir=run, out=tmp, results=results, timings=timings,
-                                   progress=progress)
-                result = st.run(ctx) or {}
-                seconds = time.perf_counter() - t0
-                write_json(tmp / "stage.json", {"key": prev, "seconds": seconds, "result": result})
-            except BaseException:
+    with folder_lock(run, what="run folder"):
+        _clean(run, stages)
+        data = cfg.model_dump(mode="json")
+        write_json(run / "experiment.json", data)
+        name = data.get("name", "experiment")
+        results: dict[str, dict] = {}
+        timings: dict[str, float] = {}
+        upstream: dict[str, str] = {}
+        cache: dict = {}
+        prev = f"v{SCHEMA_VERSION}:{data.get('kind')}"
+        with bar(len(stages), desc=f"{name}", progress=progress, unit="stage") as b:
+            for st in stages:
+                prev = content_hash({"prev": prev, **_static_part(cfg, data, st, cache), "upstream": upstream})
+                final, tmp = run / st.name, run / f".{st.name}.tmp"
+                b.set_description(f"{name}: {st.name}")
+                rec = _verified(final, prev, st.name, name)
+                if rec is not None:
+                    log.info("[%s] %s: done earlier, skipped", name, st.name)
+                    results[st.name] = rec.get("result") or {}
+                    timings[st.name] = float(rec.get("seconds", 0.0))
+                    upstream[st.name] = content_hash(rec["outputs"])
+                    b.update()
+                    continue
+                log.info("[%s] %s ...", name, st.name)
+                for f in SUMMARY_FILES:  # an earlier run's summary no longer describes this folder
+                    (run / f).unlink(missing_ok=True)
                 shutil.rmtree(tmp, ignore_errors=True)
-                raise
-            old = run / f".{st.name}.old"
-            shutil.rmtree(old, ignore_errors=True)
-            if final.exists():
-                os.replace(final, old)
-            os.replace(tmp, final)
-            shutil.rmtree(old, ignore_errors=True)
-            # the result exactly as a rerun reads it back (JSON types)
-            results[st.name] = _record(final)["result"]
-            timings[st.name] = seconds
-            log.info("[%s] %s: %.1f s", name, st.name, seconds)
-            b.update()
+                tmp.mkdir(parents=True)
+                t0 = time.perf_counter()
+                try:
+                    ctx = StageContext(cfg=cfg, run_dir=run, out=tmp, results=results, timings=timings,
+                                       progress=progress)
+                    result = st.run(ctx) or {}
+                    seconds = time.perf_counter() - t0
+                    outputs = stage_outputs(tmp, fsync=True)
+                    write_json(tmp / "stage.json", {"key": prev, "seconds": seconds, "result": result,
+                                                    "outputs": outputs})
+                    fsync_dir(tmp)
+                except BaseException:
+                    shutil.rmtree(tmp, ignore_errors=True)
+                    raise
+                old = run / f".{st.name}.old"
+                shutil.rmtree(old, ignore_errors=True)
+                if final.exists():
+                    os.replace(final, old)
+                os.replace(tmp, final)
+                fsync_dir(run)
+                shutil.rmtree(old, ignore_errors=True)
+                # the result exactly as a rerun reads it back (JSON types)
+                results[st.name] = _record(final)["result"]
+                timings[st.name] = seconds
+                upstream[st.name] = content_hash(outputs)
+                log.info("[%s] %s: %.1f s", name, st.name, seconds)
+                b.update()
     return results, timings
 
 
@@ -250,12 +401,15 @@ def run_config(cfg: BaseModel, out_dir, *, until: str | None = None, progress: P
             raise ConfigError(f"run: until={until!r} is not a stage of this {kind.name} experiment; its stages are "
                               f"{names}.")
         stages = stages[:names.index(until) + 1]
-    results, timings = run_stages(cfg, run, stages, progress=progress)
-    if until is not None:
-        return RunResult(name=cfg.name, kind=kind.name, run_dir=run, metrics={}, timings=timings, stages=results)
-    summary = kind.summary(cfg, results)
-    write_json(run / "metrics.json", summary)
-    write_json(run / "timings.json", timings)
+    from mitpiv.io.atomic import folder_lock
+
+    with folder_lock(run, what="run folder"):
+        results, timings = run_stages(cfg, run, stages, progress=progress)
+        if until is not None:
+            return RunResult(name=cfg.name, kind=kind.name, run_dir=run, metrics={}, timings=timings, stages=results)
+        summary = kind.summary(cfg, results)
+        write_json(run / "metrics.json", summary)
+        write_json(run / "timings.json", timings)
     return RunResult(name=cfg.name, kind=kind.name, run_dir=run, metrics=summary, timings=timings, stages=results)
 
 
@@ -263,8 +417,9 @@ def run_experiment(path, out_dir, *, overrides: Mapping | None = None, until: st
                    progress: Progress = None) -> RunResult:
     """Run (or resume) the experiment in ``path`` into ``out_dir``; returns its :class:`RunResult`.
 
-    Each stage is skipped when its folder holds a completion record with the same inputs
-    (the experiment's settings that reach it); a changed setting reruns that stage and the
-    ones after it. The same seed gives the same metrics.
+    Each stage is skipped when its folder holds a verified completion record with the same
+    content key (the settings that reach it, the content of the files it reads, the earlier
+    stages' outputs, the code versions); a changed setting or input file reruns that stage
+    and the ones after it. The same seed gives the same metrics.
     """
     return run_config(load_experiment(path, overrides), out_dir, until=until, progress=progress)

@@ -20,12 +20,21 @@ A point may carry a ``label`` (a name for the table and plots, not an experiment
 
 Each point is the base experiment with its overrides; the point's folder name is a hash
 of the overrides, so a rerun finds it. All points use the base seed (common random
-numbers: differences come from the parameters) unless "seed" is itself swept. A point that
-fails is recorded in the table with its error, and the others finish. The table
-(``results.csv`` and ``results.parquet``) is rewritten atomically after every finished
-point, so a killed sweep loses nothing; a rerun submits only the points without a result
-(a killed worker's task is retried by Dask, and the point resumes from its finished
-stages).
+numbers: differences come from the parameters) unless "seed" is itself swept.
+
+Every point's experiment is validated before any point runs: the config errors of all
+points are reported together. A point that fails is recorded in the table with its error,
+and the others finish; ``mitpiv sweep`` then lists the failed points and exits with
+status 1. The table (``results.csv`` and ``results.parquet``) is rewritten atomically after
+every finished point, so a killed sweep loses nothing.
+
+A point's result is reused on a rerun only when it succeeded and its recorded experiment
+key (:func:`mitpiv.studies.runner.experiment_key`: the fully resolved experiment, the
+content of its input files, the code versions) equals the point's key now: a changed base
+experiment or scene file reruns the point, in its folder, where the runner's content keys
+rerun only the stages it affects. A killed worker's task is retried by Dask, and the point
+resumes from its finished stages (its folder's lock died with the worker). The sweep folder
+is locked while a sweep runs: a second sweep on it fails at once naming the holder.
 """
 
 from __future__ import annotations
@@ -36,9 +45,9 @@ import time
 import traceback
 from pathlib import Path
 
-from mitpiv.errors import ConfigError
+from mitpiv.errors import ConfigError, MitpivError
 from mitpiv.progress import Progress, bar
-from mitpiv.studies.runner import content_hash, load_experiment, run_config
+from mitpiv.studies.runner import content_hash, experiment_key, load_experiment, run_config
 from mitpiv.studies.schema import read_toml
 
 log = logging.getLogger(__name__)
@@ -111,11 +120,13 @@ def flatten(prefix, obj, out):
 
 
 def run_point(experiment_path: str, overrides: dict, out_dir: str) -> dict:
-    """Run one point (in a Dask worker); never raises: failures become a row with the error."""
+    """Run one point (in a Dask worker); never raises: failures become a row with the error.
+    The row records the point's experiment key (``experiment_key``), which a rerun compares."""
     row = {"point": point_id(overrides), **{f"param.{k}": v for k, v in overrides.items()}}
     t0 = time.perf_counter()
     try:
         cfg = load_experiment(experiment_path, {k: v for k, v in overrides.items() if k != "label"})
+        row["experiment_key"] = experiment_key(cfg)
         row.update({"status": "ok", "error": "", **run_config(cfg, out_dir).row()})
     except Exception as e:  # noqa: BLE001 - a failed point is a result, recorded in the table
         row.update({"status": "error", "error": f"{type(e).__name__}: {e}",
@@ -147,57 +158,82 @@ def run_sweep(path, out_dir, scheduler=None, *, workers: int | None = None, full
     """
     from dask.distributed import Client, LocalCluster, as_completed
 
-    st = load_study(path, full=full)
-    # every point's experiment is validated before any point runs: a typo fails now, not in a worker
-    for ov in st["points"]:
-        try:
-            load_experiment(st["experiment"], {k: v for k, v in ov.items() if k != "label"})
-        except ConfigError as e:
-            raise ConfigError(f"study {Path(path).name}: point {ov}: {e}") from None
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    from mitpiv.io.records import read_json
+    from mitpiv.io.atomic import clean_temps, folder_lock
+    from mitpiv.io.records import read_json, write_json
     from mitpiv.studies.report import plot_sweep
 
-    rows = {}
-    for ov in st["points"]:
-        f = out / "points" / point_id(ov) / "row.json"
-        if f.is_file():
-            row = read_json(f)
-            if row.get("status") == "ok":
-                rows[row["point"]] = row
-    todo = [ov for ov in st["points"] if point_id(ov) not in rows]
-    log.info("sweep %s: %d points, %d done earlier, %d to run", st["name"], len(st["points"]), len(rows), len(todo))
-    cluster = None
-    if todo:
-        if scheduler is None:
-            n = int(workers or st.get("workers") or 2)
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
-            client = Client(cluster)
-        else:
-            client = Client(scheduler)
-        try:
-            futures = [client.submit(run_point, str(st["experiment"]), ov, str(out / "points" / point_id(ov)),
-                                     key=f"point-{point_id(ov)}", retries=2, pure=False) for ov in todo]
-            points = bar(len(todo), desc=f"sweep {st['name']}", progress=progress, unit="point")
-            for fut in as_completed(futures):
-                row = fut.result()
-                from mitpiv.io.records import write_json
-
-                write_json(out / "points" / row["point"] / "row.json", row)
-                rows[row["point"]] = row
-                _write_table(list(rows.values()), out)
-                points.update()
-                log.info("sweep %s: point %s: %s%s", st["name"], row["point"], row["status"],
-                         " - " + row["error"] if row["status"] != "ok" else "")
-            points.close()
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
-    order = [point_id(ov) for ov in st["points"]]
-    df = _write_table([rows[p] for p in order if p in rows], out)
-    plot = st.get("plot")
-    if plot and "x" in plot and "y" in plot and (df["status"] == "ok").any():
-        plot_sweep(df, plot["x"], plot["y"], out / "sweep.png", group=plot.get("group"))
+    st = load_study(path, full=full)
+    keys = _validate_points(st, Path(path).name)
+    out = Path(out_dir)
+    with folder_lock(out, what="sweep folder"):
+        clean_temps(out)
+        rows = {}
+        for ov in st["points"]:
+            pid = point_id(ov)  # (a point folder's temporary files are cleaned by its run, under its lock)
+            f = out / "points" / pid / "row.json"
+            if f.is_file():
+                try:
+                    row = read_json(f)
+                except MitpivError:
+                    continue
+                if row.get("status") == "ok" and row.get("experiment_key") == keys[pid]:
+                    rows[pid] = row
+                elif row.get("status") == "ok":
+                    log.info("sweep %s: point %s: its experiment or input files changed since it ran; it reruns",
+                             st["name"], pid)
+        todo = [ov for ov in st["points"] if point_id(ov) not in rows]
+        log.info("sweep %s: %d points, %d done earlier, %d to run", st["name"], len(st["points"]), len(rows),
+                 len(todo))
+        cluster = None
+        if todo:
+            if scheduler is None:
+                n = int(workers or st.get("workers") or 2)
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+                client = Client(cluster)
+            else:
+                client = Client(scheduler)
+            try:
+                futures = [client.submit(run_point, str(st["experiment"]), ov, str(out / "points" / point_id(ov)),
+                                         key=f"point-{point_id(ov)}", retries=2, pure=False) for ov in todo]
+                points = bar(len(todo), desc=f"sweep {st['name']}", progress=progress, unit="point")
+                for fut in as_completed(futures):
+                    row = fut.result()
+                    write_json(out / "points" / row["point"] / "row.json", row)
+                    rows[row["point"]] = row
+                    _write_table(list(rows.values()), out)
+                    points.update()
+                    log.info("sweep %s: point %s: %s%s", st["name"], row["point"], row["status"],
+                             " - " + row["error"] if row["status"] != "ok" else "")
+                points.close()
+            finally:
+                client.close()
+                if cluster is not None:
+                    cluster.close()
+        order = [point_id(ov) for ov in st["points"]]
+        df = _write_table([rows[p] for p in order if p in rows], out)
+        plot = st.get("plot")
+        if plot and "x" in plot and "y" in plot and (df["status"] == "ok").any():
+            plot_sweep(df, plot["x"], plot["y"], out / "sweep.png", group=plot.get("group"))
+    failed = df[df["status"] != "ok"]
+    if len(failed):
+        log.warning("sweep %s: %d of %d points failed: %s", st["name"], len(failed), len(df),
+                    ", ".join(failed["point"]))
     return df
+
+
+def _validate_points(st: dict, study_name: str) -> dict[str, str]:
+    """Validate every point's experiment before any runs; one ConfigError lists every bad
+    point. Returns each point's experiment key (by point id)."""
+    keys, errors = {}, []
+    for ov in st["points"]:
+        try:
+            cfg = load_experiment(st["experiment"], {k: v for k, v in ov.items() if k != "label"})
+        except MitpivError as e:
+            errors.append(f"point {ov}: {e}")
+            continue
+        keys[point_id(ov)] = experiment_key(cfg)
+    if errors:
+        head = f"study {study_name}: {len(errors)} of {len(st['points'])} points are invalid (nothing was run):"
+        raise ConfigError(head + "\n  " + "\n  ".join(errors)) if len(errors) > 1 else \
+            ConfigError(f"study {study_name}: {errors[0]}")
+    return keys

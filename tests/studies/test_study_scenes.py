@@ -52,12 +52,17 @@ def test_forward_scatter_is_brighter_than_backward(tmp_path):
 
 def _imaged_per_pixel(particles_dir, cfg, sensor_id, res):
     """Truth particles of frame 0 that project inside a pinhole sensor, per pixel."""
+    import shutil
+
     from mitpiv.io import read_truth
     from mitpiv.reconstruct import mapping_from_metadata
     from mitpiv.render.render import sensor_model
     from mitpiv.render.scene import load_scene
 
     pts = read_truth(particles_dir / "truth.npz")["positions_mm"][0]
+    # the scene reads particles_$frame.ply beside itself: a copy of it in the particles folder
+    # (the run keeps its scene copy in the render stage, which this test does not run)
+    shutil.copy(cfg.scene.xml, particles_dir / "scene.xml")
     sc = load_scene(particles_dir / "scene.xml", params=cfg.scene.params)
     sensor = next(s for s in sc.sensors() if s.id() == sensor_id)
     uv = mapping_from_metadata({"camera": sensor_model(sensor)}).project(pts)

@@ -38,7 +38,7 @@ from pydantic import Field, model_validator
 
 from mitpiv.errors import ConfigError
 from mitpiv.progress import Progress, track
-from mitpiv.studies.runner import Kind, Stage, StageContext
+from mitpiv.studies.runner import RENDER_PACKAGES, Kind, Stage, StageContext
 from mitpiv.studies.schema import Table, Vec3, discriminated, model_from_signature
 
 STAGES = ("field", "calibrate", "render", "detect", "evaluate", "report")
@@ -348,8 +348,8 @@ def stage_report(ctx: StageContext) -> dict:
 
 def stages(cfg) -> list[Stage]:
     return [Stage("field", ("seed", "field"), stage_field),
-            Stage("calibrate", ("camera", "calibration"), stage_calibrate),
-            Stage("render", ("camera", "render"), stage_render),
+            Stage("calibrate", ("camera", "calibration"), stage_calibrate, packages=RENDER_PACKAGES),
+            Stage("render", ("camera", "render"), stage_render, packages=RENDER_PACKAGES),
             Stage("detect", ("detection",), stage_detect),
             Stage("evaluate", ("tracking",), stage_evaluate),
             Stage("report", (), stage_report)]

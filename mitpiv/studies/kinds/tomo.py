@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import re
 import shutil
 from functools import cache
@@ -40,7 +41,7 @@ from pydantic import Field, model_validator
 
 from mitpiv.costs import MAX_ITERATIONS
 from mitpiv.errors import ConfigError
-from mitpiv.studies.runner import Kind, Stage, StageContext
+from mitpiv.studies.runner import RENDER_PACKAGES, Kind, Stage, StageContext
 from mitpiv.studies.schema import Table, Vec3, discriminated, model_from_signature
 
 FRAMES = (0, 1)
@@ -301,9 +302,48 @@ def stage_particles(ctx: StageContext) -> dict:
         write_particles_ply(out / f"particles_{k}.ply", p, particles.diameters_um, proxy_radius_mm=s.proxy_radius_mm)
     write_truth(out / "truth.npz", positions_mm=[particles.positions_mm, p1], times_s=[0.0, dt],
                 diameters_um=particles.diameters_um, flow=flow.to_dict(), extra={"seed": cfg.seed})
-    # the scene reads particles_$frame.ply beside itself: the run gets its own copy of the XML
-    shutil.copy(cfg.scene.xml, out / "scene.xml")
     return {"n_particles": len(particles)}
+
+
+def _uses_density(cfg) -> bool:
+    return cfg.seeding.ppp is not None or cfg.seeding.particles_per_microlens is not None
+
+
+def scene_files(cfg) -> list[Path]:
+    """The files outside the run folder that reading the scene touches: the scene XML and
+    every file it names (``filename`` attributes and ``<string name="filename">`` values,
+    ``$name`` substituted from its defaults and ``[scene] params``, relative names resolved
+    against its folder), except the particle files, which the run makes. Their content is
+    part of the render stage's key. Parsed with the standard library (no Mitsuba import)."""
+    import xml.etree.ElementTree as ET
+
+    xml = Path(cfg.scene.xml)
+    out = [xml]
+    try:
+        root = ET.parse(xml).getroot()
+    except (ET.ParseError, OSError):
+        return out  # the render stage reports the broken file
+    values = {d.get("name"): d.get("value") for d in root.iter("default")}
+    values.update({k: str(v) for k, v in cfg.scene.params.items()})
+    made = {id(s) for shape in root.iter("shape") if shape.get("type") in ("ellipsoidsmesh", "ellipsoids")
+            for s in shape.findall("string")}
+    names = []
+    for el in root.iter():
+        if el.get("filename"):
+            names.append(el.get("filename"))
+        elif el.tag == "string" and el.get("name") == "filename" and id(el) not in made and el.get("value"):
+            names.append(el.get("value"))
+    for n in names:
+        for frame in FRAMES:
+            v = {**values, "frame": str(frame)}
+            text = n
+            for k in sorted(v, key=len, reverse=True):  # as Mitsuba substitutes: each $name, longest first
+                text = text.replace(f"${k}", str(v[k]))
+            p = Path(text)
+            p = p if p.is_absolute() else xml.parent / p
+            if p not in out:
+                out.append(p)
+    return out
 
 
 def count_for_density(cfg, out: Path) -> int:
@@ -315,13 +355,19 @@ def count_for_density(cfg, out: Path) -> int:
     from mitpiv.streams import derived_seed
 
     s = cfg.seeding
-    # the scene reads particles_$frame.ply beside itself: a one-particle placeholder to load it
-    xml = out / "scene.xml"
-    shutil.copy(cfg.scene.xml, xml)
-    centre = 0.5 * (np.asarray(s.box_min_mm, float) + np.asarray(s.box_max_mm, float))
-    for k in FRAMES:
-        write_particles_ply(out / f"particles_{k}.ply", centre[None], 1.0, proxy_radius_mm=0.01)
-    sc = load_scene(xml, frame=0, params=cfg.scene.params)
+    # the scene reads particles_$frame.ply beside itself: a copy with one-particle placeholders
+    # in a scratch folder (removed: not an output of the stage)
+    scratch = out / ".density.tmp"
+    scratch.mkdir()
+    try:
+        xml = scratch / "scene.xml"
+        shutil.copy(cfg.scene.xml, xml)
+        centre = 0.5 * (np.asarray(s.box_min_mm, float) + np.asarray(s.box_max_mm, float))
+        for k in FRAMES:
+            write_particles_ply(scratch / f"particles_{k}.ply", centre[None], 1.0, proxy_radius_mm=0.01)
+        sc = load_scene(xml, frame=0, params=cfg.scene.params)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
     sensors = {(x.id() or f"sensor{i}"): x for i, x in enumerate(sc.sensors())}
     wanted = s.density_sensor or (cfg.render.sensors or [next(iter(sensors))])[0]
     if wanted not in sensors:
@@ -341,9 +387,24 @@ def stage_render(ctx: StageContext) -> dict:
     from mitpiv.render.render import render_scene
 
     cfg = ctx.cfg
-    files = render_scene(ctx.input("particles", "scene.xml"), out_dir=ctx.out, frames=FRAMES,
-                         params=cfg.scene.params, spp=cfg.render.spp, seed=cfg.seed, progress=ctx.progress,
-                         sensors=cfg.render.sensors)
+    # the scene reads particles_$frame.ply beside itself: the stage keeps its own copy of the
+    # XML (the scene it rendered) and links the particle files beside it while it renders
+    xml = ctx.out / "scene.xml"
+    shutil.copy(cfg.scene.xml, xml)
+    links = []
+    try:
+        for k in FRAMES:
+            src, dst = ctx.input("particles", f"particles_{k}.ply"), ctx.out / f"particles_{k}.ply"
+            try:
+                os.link(src, dst)
+            except OSError:  # a file system without hard links
+                shutil.copy(src, dst)
+            links.append(dst)
+        files = render_scene(xml, out_dir=ctx.out, frames=FRAMES, params=cfg.scene.params, spp=cfg.render.spp,
+                             seed=cfg.seed, progress=ctx.progress, sensors=cfg.render.sensors)
+    finally:
+        for f in links:
+            f.unlink(missing_ok=True)
     return {"images": [f.name for f in files]}
 
 
@@ -371,7 +432,8 @@ def stage_sensor(ctx: StageContext) -> dict:
         for img, meta, f in zip(imgs, ms, files, strict=True):
             key = (meta.get("sensor_id") or f.stem.rsplit("_frame", 1)[0], frame)
             rendered[key], metas[key], names[key] = img, meta, f.name
-    res = apply_sensor_set(rendered, model, seed=cfg.seed, progress=ctx.progress)
+    # every image without particle signal (no exposure: radiance rounds to 0 counts) is refused
+    res = apply_sensor_set(rendered, model, seed=cfg.seed, progress=ctx.progress, on_degenerate="raise")
     for key, c in res.counts.items():
         write_exr(ctx.out / names[key], np.asarray(c, dtype=np.float32),
                   {**metas[key], "sensor": res.metadata(key)})
@@ -424,8 +486,53 @@ def volume(run: Path, frame: int):
     return read_volume(run / "reconstruct" / f"volume_{frame}.npz")[0]
 
 
+def null_metrics(metrics: dict, reasons: dict, *, where: str) -> dict:
+    """Metrics with no value as ``None`` plus the reason: never NaN in a result.
+
+    Every non-finite float (NaN, inf; in lists too) becomes ``None``; the dotted path of
+    each (a list counts once) goes into ``metrics["null_reasons"]`` with the first reason of
+    ``reasons`` (``{path prefix: reason}``, ``""`` matching all) whose prefix it starts
+    with. Keys already ``None`` that ``reasons`` names exactly are listed too. A
+    :class:`~mitpiv.errors.MitpivWarning` names them.
+    """
+    import math
+    import warnings
+
+    from mitpiv.errors import MitpivWarning
+
+    nulls = {}
+
+    def reason(path):
+        return next((r for k, r in reasons.items() if path.startswith(k)), "not computable")
+
+    def walk(x, path):
+        if isinstance(x, dict):
+            return {k: walk(v, f"{path}.{k}" if path else str(k)) for k, v in x.items()}
+        if isinstance(x, list | tuple):
+            out = [walk(v, None) for v in x]
+            if any(v is None for v in out) and path is not None:
+                nulls[path] = reason(path)
+            return out
+        if x is None and path in reasons:
+            nulls[path] = reasons[path]
+        if isinstance(x, float) and not math.isfinite(x):
+            if path is not None:
+                nulls[path] = reason(path)
+            return None
+        return x
+
+    out = walk(metrics, "")
+    if nulls:
+        out["null_reasons"] = {**out.get("null_reasons", {}), **nulls}
+        first = next(iter(nulls))
+        warnings.warn(f"{where}: {len(nulls)} metric(s) have no value, e.g. {first!r}: {nulls[first]}.",
+                      MitpivWarning, stacklevel=2)
+    return out
+
+
 def stage_evaluate(ctx: StageContext) -> dict:
     from mitpiv import analysis
+    from mitpiv.analysis.summary import VOLUME_QUALITY_KEYS
     from mitpiv.io import read_truth
 
     cfg = ctx.cfg
@@ -434,9 +541,19 @@ def stage_evaluate(ctx: StageContext) -> dict:
     truth = read_truth(ctx.input("particles", "truth.npz"))
     metrics = {}
     for frame in FRAMES:
-        metrics[f"frame{frame}"], res = analysis.evaluate_volume(
-            volume(ctx.run_dir, frame), grid, truth["positions_mm"][frame], method=p.method,
+        vol = volume(ctx.run_dir, frame)
+        m, res = analysis.evaluate_volume(
+            vol, grid, truth["positions_mm"][frame], method=p.method,
             threshold_rel=p.threshold_rel, radius_voxels=p.radius_voxels)
+        reasons = {"particles": f"no reconstructed particle of frame {frame} matched a true one"}
+        if not np.any(np.asarray(vol) > 0):
+            # an empty volume correlates with nothing: its Q would read 0, not a measurement
+            why = (f"the reconstructed volume of frame {frame} is empty (no voxel > 0): the images carry no "
+                   f"particle inside the reconstruction bounds (check the sensor exposure, the cameras' view "
+                   f"and [reconstruction] bounds_mm)")
+            m.update({k: None for k in VOLUME_QUALITY_KEYS})
+            reasons = {**{k: why for k in VOLUME_QUALITY_KEYS}, "particles": why}
+        metrics[f"frame{frame}"] = null_metrics(m, reasons, where=f"evaluate frame {frame}")
         res.save(ctx.out / f"matches_{frame}.npz")
     return metrics
 
@@ -462,7 +579,9 @@ def stage_piv(ctx: StageContext) -> dict:
                            normalised=pv.normalised, threshold=pv.threshold,
                            replace=None if pv.replace == "none" else pv.replace, dt_s=dt, progress=ctx.progress)
     res = analysis.velocity_error(field, flow_from_dict(truth["flow"]))
-    metrics = analysis.velocity_error_summary(res)
+    metrics = null_metrics(analysis.velocity_error_summary(res), {
+        "": f"{res.get('n', 0)} valid PIV vector(s): the volumes hold no correlation peak to measure (see the "
+            f"evaluate stage's Q and the images)"}, where="piv")
     field.info["velocity_error"] = metrics
     field.save(ctx.out / "field.npz")
     write_velocity_error(ctx.out / "velocity_error.npz", res)
@@ -476,8 +595,11 @@ def stage_report(ctx: StageContext) -> dict:
 
 
 def stages(cfg) -> list[Stage]:
-    out = [Stage("particles", ("seed", "seeding", "flow", "scene"), stage_particles),
-           Stage("render", ("scene", "render"), stage_render)]
+    # the particles stage reads the scene (with Mitsuba) only to turn a density into a count
+    dens = _uses_density(cfg)
+    out = [Stage("particles", ("seed", "seeding", "flow") + (("scene",) if dens else ()), stage_particles,
+                 files=scene_files if dens else None, packages=RENDER_PACKAGES if dens else ()),
+           Stage("render", ("scene", "render"), stage_render, files=scene_files, packages=RENDER_PACKAGES)]
     if cfg.sensor is not None:
         out.append(Stage("sensor", ("sensor",), stage_sensor))
     out += [Stage("reconstruct", ("reconstruction",), stage_reconstruct),
@@ -504,12 +626,22 @@ def row(metrics: dict) -> dict:
     return out
 
 
+def fmt_metric(x, spec: str) -> str:
+    """A metric for the headline and report tables: 'n/a' where it has no value."""
+    return "n/a" if x is None else format(x, spec)
+
+
 def headline(m: dict) -> str:
     ev = (m.get("evaluate") or {}).get("frame0", {})
     pv = m.get("piv") or {}
-    return (f"{m['name']}: Q {ev.get('Q', float('nan')):.3f}, particles detected "
-            f"{100 * ev.get('particles', {}).get('detection_rate', float('nan')):.1f} %, PIV RMS error "
-            f"{', '.join(f'{x:.4f}' for x in pv.get('rms_vox', []))} voxels")
+    rate = (ev.get("particles") or {}).get("detection_rate")
+    text = (f"{m['name']}: Q {fmt_metric(ev.get('Q'), '.3f')}, particles detected "
+            f"{fmt_metric(None if rate is None else 100 * rate, '.1f')} %, PIV RMS error "
+            f"{', '.join(fmt_metric(x, '.4f') for x in pv.get('rms_vox') or [])} voxels")
+    why = {**(ev.get("null_reasons") or {}), **(pv.get("null_reasons") or {})}
+    if why:
+        text += f" (no value: {next(iter(why.values()))})"
+    return text
 
 
 KIND = Kind(name="tomo", build_schema=schema, stages=stages, summary=summary, row=row, aliases=("particles",),
