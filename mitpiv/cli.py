@@ -12,9 +12,11 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import signal
 import sys
 
+from mitpiv.costs import MAX_ITERATIONS
 from mitpiv.errors import MitpivError
 from mitpiv.reconstruct.images import RECONSTRUCT_METHODS
 
@@ -22,6 +24,162 @@ from mitpiv.reconstruct.images import RECONSTRUCT_METHODS
 RUN_FLAGS = {"seed": "seed", "method": "reconstruction.method", "iterations": "reconstruction.iterations",
              "voxel-mm": "reconstruction.voxel_mm", "dt-s": "flow.dt_s", "spp": "render.spp",
              "ppp": "seeding.ppp", "count": "seeding.count"}
+
+
+class _UsageError(Exception):
+    """A command-line argument is invalid: printed as one line, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors raised (one line from :func:`main`, no usage dump, no exit)."""
+
+    def error(self, message):
+        verb = self.prog.removeprefix("mitpiv").strip()
+        raise _UsageError(f"{verb + ': ' if verb else ''}{message} (see '{self.prog} --help').")
+
+    def parse_args(self, args=None, namespace=None):
+        argv = list(sys.argv[1:] if args is None else args)
+        ns, extras = self.parse_known_args(argv, namespace)
+        if extras:
+            i = argv.index(extras[0]) if extras[0] in argv else 0
+            prev = next((a for a in reversed(argv[:i]) if a.startswith("-")), None)
+            hint = ""
+            if prev in ("--voxel-mm", "--voxel"):
+                hint = f" ({prev} takes one value; give three voxel sizes as DX,DY,DZ, e.g. 0.1,0.1,0.2)"
+            elif prev is not None:
+                hint = f" (after {prev}, which takes fewer values)"
+            self.error(f"unrecognized arguments: {' '.join(extras)}{hint}")
+        return ns
+
+
+def _number(text: str, kind, flag_hint: str):
+    try:
+        v = kind(text)
+    except (TypeError, ValueError):
+        raise argparse.ArgumentTypeError(f"must be {flag_hint}, got {text!r}") from None
+    if kind is float and not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return v
+
+
+def _int_in(lo: int, hi: int | None = None, *, hint: str = ""):
+    """argparse type: a whole number in [lo, hi]."""
+    rng = f"[{lo}, {hi}]" if hi is not None else f">= {lo}"
+
+    def parse(text):
+        v = _number(text, int, f"a whole number {rng}")
+        if v < lo or (hi is not None and v > hi):
+            raise argparse.ArgumentTypeError(f"must be a whole number {rng}, got {v}{hint}")
+        return v
+
+    parse.__name__ = "int"
+    return parse
+
+
+def _float_in(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False, hi_open: bool = False):
+    """argparse type: a finite number in the interval (open or closed ends)."""
+    if lo is not None and hi is not None:
+        rng = f"in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+    elif lo is not None:
+        rng = f"{'>' if lo_open else '>='} {lo:g}"
+    else:
+        rng = f"{'<' if hi_open else '<='} {hi:g}" if hi is not None else ""
+
+    def parse(text):
+        v = _number(text, float, f"a number {rng}".strip())
+        bad = (lo is not None and (v < lo or (lo_open and v == lo))) or \
+              (hi is not None and (v > hi or (hi_open and v == hi)))
+        if bad:
+            raise argparse.ArgumentTypeError(f"must be a number {rng}, got {text}")
+        return v
+
+    parse.__name__ = "float"
+    return parse
+
+
+def _seed(text: str) -> int:
+    """argparse type of --seed: an integer in [0, 2**63) (the experiment seed range)."""
+    from mitpiv.streams import SEED_MAX
+
+    v = _number(text, int, "a whole number in [0, 2**63)")
+    if not 0 <= v < SEED_MAX:
+        raise argparse.ArgumentTypeError(f"must be a whole number in [0, 2**63), got {v}; give e.g. 0 or 1234")
+    return v
+
+
+def _window(text: str):
+    """argparse type of --windows: N or WXxWYxWZ, whole numbers >= 4 [voxels]."""
+    parts = text.lower().split("x")
+    try:
+        vals = [int(p) for p in parts]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"entries are N or WXxWYxWZ (whole numbers >= 4, e.g. 32 or 48x48x32), "
+                                         f"got {text!r}") from None
+    if len(vals) not in (1, 3) or min(vals) < 4:
+        raise argparse.ArgumentTypeError(f"entries are N or WXxWYxWZ (whole numbers >= 4, e.g. 32 or 48x48x32), "
+                                         f"got {text!r}")
+    return vals[0] if len(vals) == 1 else tuple(vals)
+
+
+def _voxel(text: str):
+    """argparse type of --voxel-mm: one size, or three as DX,DY,DZ [mm], each finite and > 0."""
+    parts = text.replace("x", ",").split(",")
+    try:
+        vals = [float(p) for p in parts]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be one voxel size or three as DX,DY,DZ [mm] (e.g. 0.1 or 0.1,0.1,0.2), "
+                                         f"got {text!r}") from None
+    if len(vals) not in (1, 3) or not all(math.isfinite(v) and v > 0 for v in vals):
+        raise argparse.ArgumentTypeError(f"must be one voxel size or three as DX,DY,DZ, each finite and > 0 [mm] "
+                                         f"(e.g. 0.1 or 0.1,0.1,0.2), got {text!r}")
+    return vals[0] if len(vals) == 1 else tuple(vals)
+
+
+def _out_file(path, suffixes: tuple[str, ...], flag: str = "--out"):
+    """``path`` as a Path when it is a file name ending in one of ``suffixes`` (not a folder)."""
+    from pathlib import Path
+
+    out = Path(path)
+    if out.is_dir():
+        raise MitpivError(f"{flag} {str(out)!r} is a folder; give a file name in it, e.g. {str(out / ('result' + suffixes[0]))!r}.")
+    if out.suffix not in suffixes:
+        raise MitpivError(f"{flag} must be a {' or '.join(suffixes)} file, got {str(out)!r}.")
+    return out
+
+
+def _out_dir(path, flag: str = "--out"):
+    """``path`` as a Path when it is a folder or does not exist yet (not a file)."""
+    from pathlib import Path
+
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise MitpivError(f"{flag} {str(out)!r} is a file, not a folder; give a folder (it is created), "
+                          f"e.g. {str(out.with_suffix(''))!r}.")
+    return out
+
+
+def _read_mono(path, flag: str = "image"):
+    """read_exr of a one-channel image; an RGB(A) or multi-channel EXR is refused."""
+    from mitpiv.io import read_exr
+
+    img, meta = read_exr(path)
+    if img.ndim == 3:
+        raise MitpivError(f"{flag} {str(path)!r} has {img.shape[2]} channels; mitpiv's sensor model and reconstruction "
+                          f"take one-channel (luminance) images as the mono variants render them. Convert it first, "
+                          f"e.g. to 0.2126 R + 0.7152 G + 0.0722 B, and write it with mitpiv.io.write_exr.")
+    return img, meta
+
+
+def _check_truth_frame(path, frame: int, *, need_next: bool = False):
+    """The truth file's dict when ``frame`` (and with ``need_next`` the frame after it) exists."""
+    from mitpiv.io import read_truth
+
+    truth = read_truth(path)
+    n = truth["positions_mm"].shape[0]
+    if not 0 <= frame < n - (1 if need_next else 0):
+        raise MitpivError(f"--frame {frame} is out of range: {path} holds {n} frame(s) (0 to {n - 1})"
+                          + ("; PIV needs the frame after it too" if need_next else "") + ".")
+    return truth
 
 
 def _parse_define(items: list[str]) -> dict:
@@ -37,6 +195,7 @@ def _parse_define(items: list[str]) -> dict:
 def cmd_render(args) -> int:
     import mitpiv
 
+    _out_dir(args.out)
     files = mitpiv.render_scene(
         args.scene, out_dir=args.out, frames=args.frames, params=_parse_define(args.define), spp=args.spp, seed=args.seed,
         progress=_progress(args),
@@ -58,16 +217,16 @@ def cmd_sensor(args) -> int:
     from pathlib import Path
 
     from mitpiv.imaging import SensorModel, apply_sensor_set
-    from mitpiv.io import read_exr
     from mitpiv.io.counts import write_counts
 
+    out = _out_dir(args.out)
     model = SensorModel(
         exposure=args.exposure, peak_photons=args.peak_photons, quantum_efficiency=args.qe, shot_noise=args.shot_noise,
         dark_current_e_per_s=args.dark_current, exposure_time_s=args.exposure_time, full_well_e=args.full_well,
         read_noise_e=args.read_noise, gain_e_per_count=args.gain, black_level=args.black_level,
         gaussian_noise_percent=args.noise_percent, bit_depth=args.bit_depth,
     )
-    inputs = [(Path(f), *read_exr(f)) for f in args.files]  # read everything before writing anything
+    inputs = [(Path(f), *_read_mono(f)) for f in args.files]  # read everything before writing anything
     # one exposure for the whole set (scene-wide), one noise stream per (camera, frame)
     images, where = {}, {}
     keys = [(str(meta.get("sensor_id") or path.stem), int(meta.get("frame") or 0)) for path, _, meta in inputs]
@@ -75,10 +234,13 @@ def cmd_sensor(args) -> int:
         if key in images:
             raise MitpivError(f"sensor: {path} and {where[key]} are both camera {key[0]!r}, frame {key[1]}; give each "
                               f"(camera, frame) once.")
-        images[key], where[key] = img if img.ndim == 2 else img[..., 0], path
+        images[key], where[key] = img, path
+    for path, _, _ in inputs:
+        if (out / f"{path.stem}.{args.format}").is_dir():
+            raise MitpivError(f"--out: {out / f'{path.stem}.{args.format}'} is a folder where the counts of {path} "
+                              f"go; choose another --out folder.")
     # all-black output (e.g. no --exposure: radiance taken as photons rounds to 0) is refused
     res = apply_sensor_set(images, model, seed=args.seed, progress=_progress(args), on_degenerate="raise")
-    out = Path(args.out)
     for key, (path, _, meta) in zip(keys, inputs, strict=True):
         target = out / f"{path.stem}.{args.format}"
         write_counts(target, res.counts[key], {**meta, "sensor_model": res.metadata(key)})
@@ -87,11 +249,11 @@ def cmd_sensor(args) -> int:
 
 
 def cmd_decode(args) -> int:
-    from pathlib import Path
 
     from mitpiv.lightfield import calibrate_mla, decode
     from mitpiv.render.render import write_preview
 
+    out = _out_file(args.out, (".npz",))
     cal = None
     if args.calibrate:
         if args.white is None:
@@ -106,7 +268,6 @@ def cmd_decode(args) -> int:
         print(f"MLA calibration: pitch {cal.pitch_px:.4f} px, rotation {cal.rotation_deg:.4f} deg, "
               f"{len(cal.axial)} lenslets, fit residual {cal.rms_residual_px:.3f} px RMS", file=sys.stderr)
     lf = decode(args.raw, cal, white=args.white, interpolation=args.interpolation, angular_oversample=args.angular_oversample)
-    out = Path(args.out)
     lf.save(out)
     # Sub-aperture mosaic preview: views tiled in (v, u) order.
     write_preview(out.with_suffix(".png"), lf.mosaic())
@@ -120,21 +281,33 @@ def cmd_refocus(args) -> int:
 
     import numpy as np
 
+    from mitpiv import costs
     from mitpiv.lightfield import LightField, decode, focal_stack
     from mitpiv.render.render import write_preview
 
-    src = Path(args.input)
-    lf = LightField.load(src) if src.suffix == ".npz" else decode(src, white=args.white)
+    out = _out_file(args.out, (".npy",))
     if args.z_range is not None:
-        z = np.linspace(args.z_range[0], args.z_range[1], int(args.z_range[2]))
+        count = args.z_range[2]
+        if not count.is_integer() or count < 1:
+            raise MitpivError(f"--z-range: COUNT (the number of planes) must be a whole number >= 1, got {count:g}; "
+                              f"e.g. --z-range -20 20 81.")
+        z = None
     elif args.z:
         z = np.asarray(args.z, float)
     else:
         raise MitpivError("refocus: give --z Z [Z ...] or --z-range START STOP COUNT (mm from the focal plane, + farther).")
-    out = Path(args.out)
+    src = Path(args.input)
+    lf = LightField.load(src) if src.suffix == ".npz" else decode(src, white=args.white)
+    n_planes = z.size if z is not None else int(args.z_range[2])
+    cost = costs.focal_stack_cost(n_planes, lf.shape[:2], n_samples_per_plane=float(np.prod(lf.shape)))
+    costs.check_disk(cost, out.parent, what=f"refocus: {n_planes} planes", fix="give fewer planes (--z-range COUNT) "
+                     "or write --out to a larger disk")
+    costs.check_memory(cost, what=f"refocus: {n_planes} planes", fix="give fewer planes")
+    if z is None:
+        z = np.linspace(args.z_range[0], args.z_range[1], n_planes)
     stack = focal_stack(lf, z, method=args.method, magnification=args.magnification, out=out,
                         progress=_progress(args))
-    k = int(np.argmin(np.abs(z)))
+    k = int(np.argmin(np.abs(z)))  # the preview: the plane nearest the focal plane
     write_preview(out.with_suffix(".png"), np.asarray(stack[k]))
     print(f"focal stack {stack.shape[0]} planes x {stack.shape[1]}x{stack.shape[2]} ({args.method}) -> {out}")
     return 0
@@ -146,30 +319,71 @@ def _grid_from_args(args):
     from mitpiv.grid import VoxelGrid
 
     b = args.bounds
-    return VoxelGrid.from_bounds((b[0], b[2], b[4]), (b[1], b[3], b[5]),
-                                 args.voxel_mm if len(args.voxel_mm) == 3 else args.voxel_mm[0])
+    if not all(math.isfinite(v) for v in b) or not (b[0] < b[1] and b[2] < b[3] and b[4] < b[5]):
+        raise MitpivError(f"--bounds must be finite XMIN XMAX YMIN YMAX ZMIN ZMAX [mm] with each min < max, got "
+                          f"{' '.join(f'{v:g}' for v in b)}.")
+    n = math.prod((hi - lo) / v for lo, hi, v in zip(b[0::2], b[1::2], _as3(args.voxel_mm), strict=True))
+    if n > 2**31 - 1:
+        raise MitpivError(f"--voxel-mm {args.voxel_mm} on --bounds {' '.join(f'{v:g}' for v in b)} gives {n:.3g} "
+                          f"voxels, beyond the 2^31 - 1 a volume may hold (and the memory); use larger voxels or a "
+                          f"smaller volume.")
+    return VoxelGrid.from_bounds((b[0], b[2], b[4]), (b[1], b[3], b[5]), args.voxel_mm)
+
+
+def _as3(v):
+    return tuple(v) if isinstance(v, tuple | list) else (v, v, v)
+
+
+def _reconstruct_inputs(paths):
+    """The images (one-channel) and metadata of ``mitpiv reconstruct``: one per camera, all
+    of one frame; an image given twice (the same file or the same pixels and camera) or
+    images of different frames are refused."""
+    import hashlib
+    from pathlib import Path
+
+    seen: dict[str, str] = {}
+    for f in paths:
+        key = str(Path(f).resolve())
+        if key in seen:
+            raise MitpivError(f"images: {f} is given {sum(str(Path(g).resolve()) == key for g in paths)} times; give "
+                              f"each camera's image once (the same image twice adds no view).")
+        seen[key] = f
+    images, metas, digests = [], [], {}
+    for f in paths:
+        img, meta = _read_mono(f)
+        d = hashlib.blake2b(img.tobytes() + json.dumps(meta.get("camera"), sort_keys=True).encode()).hexdigest()
+        if d in digests:
+            raise MitpivError(f"images: {f} and {digests[d]} are the same image (same pixels and the same camera); "
+                              f"give each camera's image once.")
+        digests[d] = f
+        images.append(img)
+        metas.append(meta)
+    frames = {str(f): m.get("frame") for f, m in zip(paths, metas, strict=True) if m.get("frame") is not None}
+    if len(set(frames.values())) > 1:
+        listing = ", ".join(f"{f}: frame {k}" for f, k in frames.items())
+        raise MitpivError(f"images: they are of different frames ({listing}); a volume is reconstructed from one "
+                          f"frame's images, one per camera.")
+    return images, metas
 
 
 def cmd_reconstruct(args) -> int:
     import time
-    from pathlib import Path
 
     import numpy as np
 
-    from mitpiv.io import read_exr, write_volume
+    from mitpiv import costs
+    from mitpiv.io import write_volume
     from mitpiv.reconstruct.images import reconstruct_images
     from mitpiv.render.render import write_preview
 
-    if len(args.voxel_mm) not in (1, 3):
-        raise MitpivError(f"reconstruct: --voxel-mm takes 1 (cubic) or 3 (dx dy dz) sizes in mm, got "
-                          f"{len(args.voxel_mm)}.")
-    out = Path(args.out)
-    if out.suffix != ".npz":
-        raise MitpivError(f"reconstruct: --out must be a .npz file, got {str(out)!r}.")
+    out = _out_file(args.out, (".npz",))
     grid = _grid_from_args(args)
-    inputs = [read_exr(f) for f in args.images]
-    images = [img if img.ndim == 2 else img[..., 0] for img, _ in inputs]
-    metas = [m for _, m in inputs]
+    truth = _check_truth_frame(args.truth, args.frame) if args.truth else None
+    images, metas = _reconstruct_inputs(args.images)
+    costs.check_memory(costs.reconstruction_cost(grid.n_voxels, n_images=len(images), iterations=args.iterations,
+                                                 method=args.method),
+                       what=f"reconstruct: --voxel-mm {args.voxel_mm} on --bounds {' '.join(map(str, args.bounds))}",
+                       fix="use larger voxels (--voxel-mm) or a smaller volume (--bounds)")
     logging.getLogger("mitpiv").info("grid %dx%dx%d voxels of %s mm, %d image(s), method %s", grid.shape[2],
                                      grid.shape[1], grid.shape[0], grid.voxel_mm, len(images), args.method)
     t0 = time.perf_counter()
@@ -180,12 +394,10 @@ def cmd_reconstruct(args) -> int:
                                    rays_per_pixel=args.rays_per_pixel, progress=_progress(args))
     elapsed = time.perf_counter() - t0
     metrics = {}
-    if args.truth:
+    if truth is not None:
         from mitpiv import analysis
-        from mitpiv.io import read_truth
 
-        truth = analysis.truth_volume(read_truth(args.truth)["positions_mm"][args.frame], grid)
-        metrics = analysis.volume_quality(vol, truth)
+        metrics = analysis.volume_quality(vol, analysis.truth_volume(truth["positions_mm"][args.frame], grid))
     record = {"method": args.method, "images": [str(f) for f in args.images], "grid": grid.to_dict(),
               "seconds": elapsed, "metrics": metrics,
               "info": {k: v for k, v in info.items() if isinstance(v, int | float | str | list)}}
@@ -197,29 +409,16 @@ def cmd_reconstruct(args) -> int:
     return 0
 
 
-def _truth_frame(path, frame: int):
-    from mitpiv.io import read_truth
-
-    truth = read_truth(path)
-    n = truth["positions_mm"].shape[0]
-    if not (-n <= frame < n):
-        raise MitpivError(f"--frame {frame} is out of range: {path} holds {n} frame(s).")
-    return truth
-
-
 def cmd_evaluate(args) -> int:
-    from pathlib import Path
 
     from mitpiv import analysis
     from mitpiv.io.records import write_json
 
-    out_path = Path(args.out) if args.out else None
-    if out_path is not None and out_path.suffix != ".json":
-        raise MitpivError(f"evaluate: --out must be a .json file, got {str(out_path)!r}.")
+    out_path = _out_file(args.out, (".json",)) if args.out else None
     from mitpiv.io import read_volume
 
+    truth = _check_truth_frame(args.truth, args.frame)
     vol, grid, _ = read_volume(args.volume)
-    truth = _truth_frame(args.truth, args.frame)
     metrics, res = analysis.evaluate_volume(vol, grid, truth["positions_mm"][args.frame], method=args.method,
                                             threshold_rel=args.threshold_rel, radius_voxels=args.radius_voxels)
     out = {"volume": str(args.volume), "truth": str(args.truth), "frame": args.frame, "method": args.method, **metrics}
@@ -239,32 +438,35 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_piv(args) -> int:
-    from pathlib import Path
 
-    from mitpiv import analysis
+    from mitpiv import analysis, costs
 
-    out = Path(args.out)
-    if out.suffix != ".npz":
-        raise MitpivError(f"piv: --out must be a .npz file, got {str(out)!r}.")
+    out = _out_file(args.out, (".npz",))
     from mitpiv.io import read_volume
+
+    truth = _check_truth_frame(args.truth, args.frame, need_next=True) if args.truth else None
 
     va, grid, _ = read_volume(args.vol_a)
     vb, grid_b, _ = read_volume(args.vol_b)
     if grid_b != grid:
         raise MitpivError(f"piv: the volumes lie on different grids ({grid.to_dict()} vs {grid_b.to_dict()}); "
                           f"reconstruct both frames on the same --bounds and --voxel.")
-    windows = [tuple(int(x) for x in w.split("x")) if "x" in w else int(w) for w in args.windows]
-    if any(isinstance(w, tuple) and len(w) != 3 for w in windows):
-        raise MitpivError(f"piv: --windows entries are N or WXxWYxWZ, got {args.windows}.")
+    windows = args.windows
+    nz, ny, nx = grid.shape
+    for w in windows:
+        wx, wy, wz = w if isinstance(w, tuple) else (w, w, w)
+        if wx > nx or wy > ny or wz > nz:
+            raise MitpivError(f"--windows {'x'.join(map(str, (wx, wy, wz)))} does not fit the volume of {nx}x{ny}x{nz} "
+                              f"voxels (x, y, z); give windows no larger than the volume.")
+    costs.check_memory(costs.piv_cost(grid.shape, windows, args.overlap),
+                       what=f"piv: --windows {' '.join(map(str, args.windows))} --overlap {args.overlap}",
+                       fix="use a smaller --overlap or larger --windows")
     dt, flow, t0 = args.dt_s, None, 0.0
-    if args.truth:
+    if truth is not None:
         from mitpiv.physics.flows import flow_from_dict
 
-        truth = _truth_frame(args.truth, args.frame)
         if not truth["flow"]:
             raise MitpivError(f"piv: {args.truth} names no analytic flow; velocity errors need one.")
-        if truth["times_s"].size < args.frame + 2:
-            raise MitpivError(f"piv: {args.truth} has no frame after --frame {args.frame}.")
         flow = flow_from_dict(truth["flow"])
         t0 = float(truth["times_s"][args.frame])
         dt = dt if dt else float(truth["times_s"][args.frame + 1] - t0)
@@ -314,6 +516,7 @@ def cmd_run(args) -> int:
         return 0
     if args.out is None:
         raise MitpivError("run: give --out DIR (the run folder), or --check to validate only.")
+    _out_dir(args.out)
     result = run_experiment(args.experiment, args.out, overrides=overrides, progress=_progress(args))
     print(f"{result.headline()} -> {args.out}/report/report.md")
     return 0
@@ -331,6 +534,9 @@ def cmd_schema(args) -> int:
 def cmd_sweep(args) -> int:
     from mitpiv.studies import run_sweep
 
+    _out_dir(args.out)
+    if args.scheduler is not None:
+        _check_scheduler(args.scheduler)
     df = run_sweep(args.study, args.out, scheduler=args.scheduler, workers=args.workers, full=args.full,
                    progress=_progress(args))
     ok = int((df["status"] == "ok").sum())
@@ -345,9 +551,33 @@ def cmd_sweep(args) -> int:
     return 0
 
 
+def _check_scheduler(address: str, timeout_s: float = 3.0) -> None:
+    """Refuse a --scheduler address that is malformed or where nothing answers within ``timeout_s``."""
+    import socket
+    from urllib.parse import urlsplit
+
+    text = address if "://" in address else f"tcp://{address}"
+    try:
+        u = urlsplit(text)
+        host, port = u.hostname, u.port
+    except ValueError:
+        host = port = None
+    if u.scheme not in ("tcp", "tls", "ws", "wss") or not host or port is None:
+        raise MitpivError(f"--scheduler must be a Dask scheduler address HOST:PORT or tcp://HOST:PORT, got "
+                          f"{address!r}; or leave it out for a local cluster.")
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s):
+            pass
+    except OSError as e:
+        raise MitpivError(f"--scheduler {address}: nothing answers there within {timeout_s:g} s "
+                          f"({e.strerror or type(e).__name__}); start the scheduler (dask scheduler) or leave "
+                          f"--scheduler out for a local cluster.") from None
+
+
 def cmd_bench(args) -> int:
     from mitpiv.studies.accuracy import accuracy_time
 
+    _out_dir(args.out)
     stages = [s.strip() for s in args.stages.split(",")] if args.stages else None
     accuracy_time(args.out, size="quick" if args.quick else "full", stages=stages, seed=args.seed)
     print(f"wrote {args.out}/accuracy_time.md, accuracy_time.csv and pareto_*.png")
@@ -367,6 +597,8 @@ def cmd_replicate(args) -> int:
         if args.study is None and not args.list:
             raise MitpivError("replicate: name a study (see the list above), e.g. mitpiv replicate NAME --quick.")
         return 0
+    if args.out is not None:
+        _out_dir(args.out)
     res = replicate(args.study, args.out, quick=args.quick, seed=args.seed, workers=args.workers,
                     progress=_progress(args))
     rows = res["rows"]
@@ -411,17 +643,17 @@ def _flag_kwargs(key: str) -> dict:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="mitpiv", description="Physically based rendering testbed for volumetric PIV.")
+    p = _Parser(prog="mitpiv", description="Physically based rendering testbed for volumetric PIV.")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bars or progress messages")
     p.add_argument("--verbose", "-v", action="store_true", help="debug messages (every step of long loops)")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render every sensor of a scene XML for each frame to EXR + PNG")
     r.add_argument("scene", help="scene XML file")
     r.add_argument("--out", required=True, help="output folder")
-    r.add_argument("--frames", type=int, nargs="+", default=[0, 1], help="frames to render (default: 0 1)")
+    r.add_argument("--frames", type=_int_in(0), nargs="+", default=[0, 1], help="frames to render (default: 0 1)")
     r.add_argument("-D", dest="define", action="append", metavar="NAME=VALUE", help="scene parameter ($NAME)")
     r.add_argument("--spp", type=int, default=None, help="samples per pixel (camera-tracing integrators)")
-    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--seed", type=_seed, default=0, help="experiment seed, in [0, 2**63)")
     r.set_defaults(func=cmd_render)
     i = sub.add_parser("info", help="print an EXR file's mitpiv metadata")
     i.add_argument("file")
@@ -442,7 +674,7 @@ def main(argv=None) -> int:
     s.add_argument("--gain", type=float, default=1.0, help="electrons per count")
     s.add_argument("--black-level", type=float, default=0.0, help="offset [counts]")
     s.add_argument("--noise-percent", type=float, default=0.0, help="white Gaussian noise, %% of the peak")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=_seed, default=0, help="noise seed, in [0, 2**63)")
     s.set_defaults(func=cmd_sensor)
     d = sub.add_parser("decode", help="decode a raw plenoptic EXR into a 4D light field (.npz) + sub-aperture mosaic")
     d.add_argument("raw", help="raw EXR rendered by a plenoptic sensor")
@@ -451,13 +683,14 @@ def main(argv=None) -> int:
     d.add_argument("--calibrate", action="store_true", help="calibrate the MLA from --white instead of using the metadata")
     d.add_argument("--layout", choices=["rect", "hex"], default=None, help="MLA layout for --calibrate")
     d.add_argument("--interpolation", choices=["nearest", "linear", "cubic"], default="linear")
-    d.add_argument("--angular-oversample", type=int, default=1)
+    d.add_argument("--angular-oversample", type=_int_in(1, 8), default=1, help="views per lenslet pitch (1..8)")
     d.set_defaults(func=cmd_decode)
     f = sub.add_parser("refocus", help="focal stack of a light field (.npz) or raw EXR, streamed to a .npy file")
     f.add_argument("input", help="light field .npz (mitpiv decode) or raw EXR")
     f.add_argument("--out", required=True, help="output .npy (n_z, n_t, n_s)")
-    f.add_argument("--z", type=float, nargs="+", help="depths [mm] from the focal plane (+ = farther)")
-    f.add_argument("--z-range", type=float, nargs=3, metavar=("START", "STOP", "COUNT"))
+    f.add_argument("--z", type=_float_in(), nargs="+", help="depths [mm] from the focal plane (+ = farther)")
+    f.add_argument("--z-range", type=_float_in(), nargs=3, metavar=("START", "STOP", "COUNT"),
+                   help="COUNT planes from START to STOP [mm]")
     f.add_argument("--method", choices=["additive", "multiplicative"], default="additive")
     f.add_argument("--magnification", choices=["natural", "constant"], default="natural")
     f.add_argument("--white", default=None, help="white EXR (raw-EXR input only)")
@@ -466,48 +699,49 @@ def main(argv=None) -> int:
     c.add_argument("images", nargs="+", help="EXR images with camera metadata (one per camera)")
     c.add_argument("--out", required=True, help="output .npz (volume (n_z, n_y, n_x) + JSON meta)")
     c.add_argument("--method", choices=RECONSTRUCT_METHODS, default="mart")
-    c.add_argument("--bounds", type=float, nargs=6, required=True, metavar=("XMIN", "XMAX", "YMIN", "YMAX", "ZMIN", "ZMAX"),
+    c.add_argument("--bounds", type=_float_in(), nargs=6, required=True, metavar=("XMIN", "XMAX", "YMIN", "YMAX", "ZMIN", "ZMAX"),
                    help="volume [mm]")
-    c.add_argument("--voxel-mm", "--voxel", dest="voxel_mm", type=float, nargs="+", required=True,
-                   help="voxel size [mm]: one (cubic) or three (dx dy dz) (--voxel: deprecated)")
-    c.add_argument("--iterations", type=int, default=5)
-    c.add_argument("--mu", type=float, default=1.0, help="MART relaxation (0, 2)")
+    c.add_argument("--voxel-mm", "--voxel", dest="voxel_mm", type=_voxel, required=True,
+                   help="voxel size [mm]: one (cubic) or three as DX,DY,DZ (--voxel: deprecated)")
+    c.add_argument("--iterations", type=_int_in(0, MAX_ITERATIONS), default=5,
+                   help=f"MART / SMART / DRT-MART iterations (0..{MAX_ITERATIONS})")
+    c.add_argument("--mu", type=_float_in(0, 2, lo_open=True, hi_open=True), default=1.0, help="MART relaxation (0, 2)")
     c.add_argument("--weights", choices=["circle", "gaussian"], default="circle")
     c.add_argument("--interpolation", choices=["linear", "cubic"], default="linear")
-    c.add_argument("--preprocess", type=float, default=None, metavar="K", help="histogram threshold: background + K sigma")
+    c.add_argument("--preprocess", type=_float_in(), default=None, metavar="K", help="histogram threshold: background + K sigma")
     c.add_argument("--combine", choices=["additive", "multiplicative"], default="multiplicative",
                    help="sapiv / plenoptic combination")
-    c.add_argument("--threshold-k", type=float, default=3.0, help="sapiv: keep mean + k sigma per plane (< 0: none)")
+    c.add_argument("--threshold-k", type=_float_in(), default=3.0, help="sapiv: keep mean + k sigma per plane (< 0: none)")
     c.add_argument("--white", nargs="+", default=None, help="plenoptic: white EXR per image")
-    c.add_argument("--rays-per-pixel", type=int, default=16, help="drt-mart ray bundle per pixel")
+    c.add_argument("--rays-per-pixel", type=_int_in(1, 4096), default=16, help="drt-mart ray bundle per pixel")
     c.add_argument("--truth", default=None, help="truth .npz: print Q, Q*, Q' and SNR")
-    c.add_argument("--frame", type=int, default=0, help="truth frame of the images")
+    c.add_argument("--frame", type=_int_in(0), default=0, help="truth frame of the images")
     c.set_defaults(func=cmd_reconstruct)
     e = sub.add_parser("evaluate", help="find particles in a reconstructed volume, match them to the truth, print errors")
     e.add_argument("volume", help="volume .npz from 'mitpiv reconstruct'")
     e.add_argument("--truth", required=True, help="truth .npz (particle positions per frame)")
-    e.add_argument("--frame", type=int, default=0, help="truth frame of the volume")
+    e.add_argument("--frame", type=_int_in(0), default=0, help="truth frame of the volume")
     e.add_argument("--method", choices=["gauss3", "centroid", "lsq"], default="gauss3", help="sub-voxel localisation")
-    e.add_argument("--threshold-rel", type=float, default=0.1, help="peaks above this fraction of the maximum")
-    e.add_argument("--radius-voxels", type=float, default=2.0, help="matching search radius [voxels]")
+    e.add_argument("--threshold-rel", type=_float_in(0, 1, hi_open=True), default=0.1, help="peaks above this fraction of the maximum")
+    e.add_argument("--radius-voxels", type=_float_in(0, lo_open=True), default=2.0, help="matching search radius [voxels]")
     e.add_argument("--out", default=None, help="metrics .json (+ error PDF plot .png)")
     e.set_defaults(func=cmd_evaluate)
     v = sub.add_parser("piv", help="multi-pass 3D cross-correlation between two reconstructed volumes")
     v.add_argument("vol_a", help="volume .npz of the first frame")
     v.add_argument("vol_b", help="volume .npz of the second frame")
     v.add_argument("--out", required=True, help="vector field .npz")
-    v.add_argument("--windows", nargs="+", default=["64", "48", "32"],
+    v.add_argument("--windows", type=_window, nargs="+", default=[64, 48, 32],
                    help="window per pass: N (cubic) or WXxWYxWZ (default 64 48 32)")
-    v.add_argument("--overlap", type=float, default=0.75, help="window overlap fraction [0, 1)")
+    v.add_argument("--overlap", type=_float_in(0, 1, hi_open=True), default=0.75, help="window overlap fraction [0, 1)")
     v.add_argument("--no-deform", action="store_true", help="integer window shifting instead of window deformation")
     v.add_argument("--interpolation", choices=["linear", "cubic"], default="cubic", help="deformation resampling")
     v.add_argument("--normalised", action="store_true", help="normalised cross-correlation")
-    v.add_argument("--threshold", type=float, default=2.0, help="universal outlier detection threshold")
+    v.add_argument("--threshold", type=_float_in(0, lo_open=True), default=2.0, help="universal outlier detection threshold")
     v.add_argument("--replace", choices=["median", "interpolation", "none"], default="median")
-    v.add_argument("--dt-s", "--dt", dest="dt_s", type=float, default=None,
+    v.add_argument("--dt-s", "--dt", dest="dt_s", type=_float_in(0, lo_open=True), default=None,
                    help="time between the frames [s]: velocities in mm/s (--dt: deprecated)")
     v.add_argument("--truth", default=None, help="truth .npz with the flow: velocity error against it")
-    v.add_argument("--frame", type=int, default=0, help="truth frame of vol_a")
+    v.add_argument("--frame", type=_int_in(0), default=0, help="truth frame of vol_a")
     v.set_defaults(func=cmd_piv)
     x = sub.add_parser("run", help="run (or resume) an experiment TOML: render, reconstruct, evaluate, PIV, report")
     x.add_argument("experiment", help="experiment .toml")
@@ -525,7 +759,7 @@ def main(argv=None) -> int:
     w.add_argument("study", help="study .toml")
     w.add_argument("--out", required=True, help="sweep folder (results table, one run folder per point)")
     w.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (default: a local cluster)")
-    w.add_argument("--workers", type=int, default=None, help="local cluster worker processes (default 2)")
+    w.add_argument("--workers", type=_int_in(1, 512), default=None, help="local cluster worker processes (default 2)")
     w.add_argument("--full", action="store_true", help="the full-size study (the study's [full] overrides)")
     w.set_defaults(func=cmd_sweep)
     b = sub.add_parser("bench", help="benchmarks: 'accuracy-time' measures every accuracy knob's time and error")
@@ -534,7 +768,7 @@ def main(argv=None) -> int:
     b.add_argument("--quick", action="store_true", help="the small preset (seconds; default: the full preset, ~15 min)")
     b.add_argument("--stages", default=None,
                    help="comma-separated subset of render,lightfield,reconstruct,piv,end_to_end (default all)")
-    b.add_argument("--seed", type=int, default=0, help="seed of the particle field")
+    b.add_argument("--seed", type=_seed, default=0, help="seed of the particle field, in [0, 2**63)")
     b.set_defaults(func=cmd_bench)
     rp = sub.add_parser("replicate", help="replicate a published study (the paper's set-up and measures, "
                         "results side by side)")
@@ -542,10 +776,14 @@ def main(argv=None) -> int:
     rp.add_argument("--list", action="store_true", help="list the replications and their papers")
     rp.add_argument("--quick", action="store_true", help="the reduced study (minutes; same code and row ids)")
     rp.add_argument("--out", default=None, help="output folder (default out/replicate/NAME[-quick]); resumes")
-    rp.add_argument("--seed", type=int, default=0, help="base seed of every random stream")
-    rp.add_argument("--workers", type=int, default=1, help="local Dask worker processes for independent points")
+    rp.add_argument("--seed", type=_seed, default=0, help="base seed of every random stream, in [0, 2**63)")
+    rp.add_argument("--workers", type=_int_in(1, 512), default=1, help="local Dask worker processes for independent points")
     rp.set_defaults(func=cmd_replicate)
-    args = p.parse_args(argv)
+    try:
+        args = p.parse_args(argv)
+    except _UsageError as e:
+        print(f"mitpiv: error: {e}", file=sys.stderr)
+        return 2
     from mitpiv.progress import set_quiet
 
     if args.quiet:
@@ -559,9 +797,9 @@ def main(argv=None) -> int:
 
     previous = _stop_on_sigterm()
     try:
-        with logging_redirect_tqdm(loggers=[logging.getLogger("mitpiv")]):  # messages print above the bars
+        with logging_redirect_tqdm(loggers=[logging.root]):  # messages print above the bars (once: via the root)
             return args.func(args)
-    except MitpivError as e:
+    except (MitpivError, _UsageError) as e:
         print(f"mitpiv: error: {e}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, _Terminated) as e:

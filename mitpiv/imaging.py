@@ -170,10 +170,24 @@ def resolve_exposure(model: SensorModel, scene_peak: float) -> tuple[float, floa
     return exposure, noise_peak
 
 
+#: Largest mean [electrons] drawn from the Poisson distribution; brighter pixels keep their
+#: mean (the relative shot noise there is below 3e-8) and saturate at the full well.
+POISSON_MAX_E = 1e15
+
+
 def _counts(img: np.ndarray, m: SensorModel, rng: np.random.Generator, exposure: float,
             noise_peak: float | None) -> np.ndarray:
     mean_e = img * (exposure * m.quantum_efficiency)
-    e = rng.poisson(mean_e).astype(np.float64) if m.shot_noise else mean_e
+    if m.shot_noise:
+        # NumPy's Poisson sampler refuses means near 2**63 ("lam value too large"); far below
+        # that the shot noise (sqrt(mean)/mean < 3e-8 at 1e15 e-) is negligible and the pixel
+        # saturates at the full well or the ADC's top code anyway: such pixels keep their mean.
+        big = mean_e > POISSON_MAX_E
+        e = rng.poisson(np.minimum(mean_e, POISSON_MAX_E)).astype(np.float64)
+        if big.any():
+            e = np.where(big, mean_e, e)
+    else:
+        e = mean_e
     dark = m.dark_current_e_per_s * m.exposure_time_s
     if dark > 0:
         e = e + rng.poisson(dark, size=e.shape)

@@ -86,17 +86,29 @@ def read_npz(path, *, what: str = "array file", required=()) -> dict:
     path = Path(path)
     if not path.is_file():
         raise FileFormatError(f"{what} file {str(path)!r} does not exist.")
+    expected = f"expected a {what} (.npz: a zip archive of named NumPy arrays, as mitpiv writes it)"
+    with open(path, "rb") as fh:
+        head = fh.read(6)
+    if not head:
+        raise FileFormatError(f"{str(path)!r}: the file is empty; {expected}.")
+    if head.startswith(b"\x93NUMPY"):
+        raise FileFormatError(f"{str(path)!r}: it holds a single array (.npy), not named arrays; {expected}.")
+    if not head.startswith(b"PK"):
+        raise FileFormatError(f"{str(path)!r}: it is not a zip archive (it starts with {head!r}); {expected}.")
     try:
-        z = np.load(path, allow_pickle=False)
-        if not isinstance(z, np.lib.npyio.NpzFile):
-            raise ValueError("it holds a single array, not named arrays")
-        with z:
+        with np.load(path, allow_pickle=False) as z:
             out = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-        raise FileFormatError(f"{str(path)!r} is not a {what} (.npz) file ({e}).") from None
+    except ValueError as e:
+        if "pickle" in str(e):
+            raise FileFormatError(f"{str(path)!r}: an entry holds pickled Python objects, which mitpiv never reads "
+                                  f"(unsafe); {expected}.") from None
+        raise FileFormatError(f"{str(path)!r}: {e}; {expected}.") from None
+    except (OSError, EOFError, zipfile.BadZipFile) as e:
+        raise FileFormatError(f"{str(path)!r}: the archive is truncated or corrupt ({e}); {expected}.") from None
     missing = [k for k in required if k not in out]
     if missing:
-        raise FileFormatError(f"{str(path)!r} is not a {what} file: it lacks {missing} (it holds {sorted(out)}).")
+        raise FileFormatError(f"{str(path)!r}: it lacks the entries {missing} (it holds {sorted(out)}); expected a "
+                              f"{what} file with {list(required)}.")
     return out
 
 

@@ -103,13 +103,23 @@ def atomic_path(path, suffix: str | None = None, *, size_bytes: float | None = N
     over ``path`` (then flush the folder).
 
     On an exception (or a ``KeyboardInterrupt`` / ``SystemExit``) the temporary file is
-    removed and ``path`` is untouched. The file gets the permissions of a plainly created
-    one (0666 less the umask), not mkstemp's 0600.
+    removed and ``path`` is untouched. A ``path`` that is an existing folder (or lies in a
+    file) is a :class:`~mitpiv.errors.ConfigError`. The file gets the permissions of a
+    plainly created one (0666 less the umask), not mkstemp's 0600.
 
     size_bytes : an estimate of the file's size [bytes]; when given, the free disk space is
         checked first (:func:`check_free_space`) and nothing is written if it is short.
     """
     path = Path(path)
+    if path.is_dir():
+        from mitpiv.errors import ConfigError
+
+        raise ConfigError(f"{str(path)!r} is a folder, not a file name; give the file to write, e.g. "
+                          f"{str(path / ('result' + (suffix or path.suffix or '')))!r}.")
+    if path.parent.exists() and not path.parent.is_dir():
+        from mitpiv.errors import ConfigError
+
+        raise ConfigError(f"{str(path.parent)!r} is a file, not a folder; {path.name!r} cannot be written in it.")
     path.parent.mkdir(parents=True, exist_ok=True)
     if size_bytes is not None:
         check_free_space(path.parent, size_bytes, what=f"{path.name!r}")

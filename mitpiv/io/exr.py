@@ -74,6 +74,12 @@ def read_exr(path) -> tuple[np.ndarray, dict]:
     path = Path(path)
     if not path.is_file():
         raise FileFormatError(f"read_exr: {str(path)!r} does not exist.")
+    with open(path, "rb") as fh:
+        head = fh.read(4)
+    if head != b"\x76\x2f\x31\x01":  # the OpenEXR magic number 20000630
+        what = "the file is empty, not a readable EXR file" if not head else \
+            f"it is not a readable EXR file (it starts with {head!r})"
+        raise FileFormatError(f"read_exr: {str(path)!r}: {what}; expected a float32 OpenEXR image (.exr).")
     try:
         with OpenEXR.File(str(path)) as f:
             meta = f.header().get(METADATA_KEY)

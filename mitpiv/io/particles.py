@@ -108,6 +108,14 @@ def read_particles_ply(path) -> dict:
             f"{count} particles ({need} expected)."
         )
     data = np.frombuffer(body, dtype="<f4").reshape(count, len(PLY_FIELDS)).astype(np.float64)
+    bad = ~np.isfinite(data[:, [0, 1, 2, 6, 7]]).all(axis=1)
+    if bad.any():
+        raise FileFormatError(f"particle file {str(path)!r}: {int(bad.sum())} of {count} particles have a non-finite "
+                              f"position, diameter or proxy radius (the first: particle {int(np.argmax(bad))}); expected "
+                              f"finite float32 values as write_particles_ply writes them.")
+    if count and not (data[:, 6] > 0).all():
+        raise FileFormatError(f"particle file {str(path)!r}: {int((data[:, 6] <= 0).sum())} particles have a diameter "
+                              f"<= 0; expected positive diameters [um].")
     return {
         "positions_mm": data[:, 0:3].copy(),
         "diameters_um": data[:, 6].copy(),

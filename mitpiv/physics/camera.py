@@ -27,6 +27,7 @@ are written against it, not against one camera class.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
@@ -158,6 +159,9 @@ class PinholeCamera:
         if self.principal_point_px is None:
             self.principal_point_px = (w / 2.0, h / 2.0)
         self.principal_point_px = tuple(float(v) for v in self.principal_point_px)
+        if len(self.principal_point_px) != 2 or not all(math.isfinite(v) for v in self.principal_point_px):
+            raise ConfigError(f"camera: 'principal_point_px' must be two finite pixel coordinates (cx, cy), got "
+                              f"{self.principal_point_px!r}; leave it out for the sensor centre ({w / 2}, {h / 2}).")
         self.rotation = np.asarray(self.rotation, dtype=float).reshape(3, 3)
         if not np.allclose(self.rotation @ self.rotation.T, np.eye(3), atol=1e-9) or np.linalg.det(self.rotation) < 0:
             raise ConfigError("camera: rotation must be a proper rotation matrix (orthonormal, det +1).")

@@ -341,11 +341,13 @@ class GridFlow(Flow):
         p = Path(path)
         if not p.is_file():
             raise ConfigError(f"GridFlow: flow file {str(p)!r} does not exist.")
-        try:
-            data = np.load(p)
-            axes = [np.asarray(data[k], float) for k in ("x", "y", "z")]
-            comps = [np.asarray(data[k], float) for k in ("u", "v", "w")]
-        except (KeyError, ValueError, OSError) as e:
+        import zipfile
+
+        try:  # physics sits below io: the .npz is read here, without pickle
+            with np.load(p, allow_pickle=False) as data:
+                axes = [np.asarray(data[k], float) for k in ("x", "y", "z")]
+                comps = [np.asarray(data[k], float) for k in ("u", "v", "w")]
+        except (KeyError, ValueError, TypeError, OSError, EOFError, AttributeError, zipfile.BadZipFile) as e:
             raise FileFormatError(
                 f"GridFlow: {str(p)!r} must be an NPZ with arrays x, y, z, u, v, w ({e})."
             ) from None

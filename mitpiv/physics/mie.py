@@ -123,6 +123,10 @@ def lognormal(median_um: float, geometric_std: float, *, nodes: int = 161, span:
     return SizeDistribution(median_um * np.exp(s * z), w)
 
 
+#: Largest absorption index k of a particle index n + ik (metals in the far infrared).
+MAX_ABSORPTION_INDEX = 100.0
+
+
 def _check_inputs(m_particle, wavelength_nm, n_medium):
     m_particle = complex(m_particle)
     if not (np.isfinite(m_particle.real) and np.isfinite(m_particle.imag)) or m_particle.real <= 0:
@@ -133,6 +137,11 @@ def _check_inputs(m_particle, wavelength_nm, n_medium):
             f"n + ik with absorption k >= 0 (Bohren & Huffman); for an n - ik value (Wiscombe, miepython) "
             f"use {m_particle.conjugate()!r}."
         )
+    if m_particle.imag > MAX_ABSORPTION_INDEX:
+        raise ConfigError(
+            f"mie: 'm_particle' = {m_particle!r} has an absorption index k = {m_particle.imag:g} > "
+            f"{MAX_ABSORPTION_INDEX:g}; no material absorbs that strongly (metals reach k ~ 10 in the visible, "
+            f"~100 in the far infrared). Check the imaginary part (n + ik).")
     if not (np.isfinite(wavelength_nm) and wavelength_nm > 0):
         raise ConfigError(f"mie: 'wavelength_nm' must be positive (vacuum wavelength in nm), got {wavelength_nm!r}.")
     if not (np.isfinite(n_medium) and n_medium > 0) or isinstance(n_medium, complex):

@@ -162,6 +162,14 @@ class PlenopticCamera:
         if not abs(self.mla_rotation_deg) <= 30.0:
             raise ConfigError(f"{_OWNER}: 'mla_rotation_deg' must lie in [-30, 30] deg (a misalignment), got {self.mla_rotation_deg!r}.")
         self.mla_offset_um = (float(self.mla_offset_um[0]), float(self.mla_offset_um[1]))
+        ox, oy = self.mla_offset_um
+        half_w, half_h = 0.5 * w * self.pixel_pitch_um, 0.5 * h * self.pixel_pitch_um
+        if not (math.isfinite(ox) and math.isfinite(oy)) or abs(ox) >= half_w or abs(oy) >= half_h:
+            raise ConfigError(
+                f"{_OWNER}: 'mla_offset_um' {self.mla_offset_um} moves the MLA centre off the sensor "
+                f"({2 * half_w:.1f} x {2 * half_h:.1f} um): each offset must be finite and below half the sensor "
+                f"(|x| < {half_w:.1f}, |y| < {half_h:.1f} um). An offset is a misalignment, typically below one "
+                f"lenslet pitch ({self.mla_pitch_um} um).")
         if self.pmr < 2.0:
             raise ConfigError(
                 f"{_OWNER}: the lenslet pitch ({self.mla_pitch_um} um) covers {self.pmr:.3g} pixels of "

@@ -135,6 +135,26 @@ def load_dict(d: dict):
     return obj
 
 
+def _check_proxy(ply: dict, path) -> None:
+    """Warn when the proxy spheres are as large as the particle cloud: legal (images do not
+    depend on the proxy radius) but every camera ray then hits some proxy, the render slows
+    down and overlapping proxies hide one another."""
+    pos = ply["positions_mm"]
+    if len(pos) < 2:
+        return
+    extent = float(np.ptp(pos, axis=0).max())
+    r = float(np.max(ply["proxy_radius_mm"]))
+    if extent > 0 and r >= 0.5 * extent:
+        import warnings
+
+        from mitpiv.errors import MitpivWarning
+
+        warnings.warn(f"{path}: proxy radius {r:.4g} mm is at least half the extent of the particle cloud "
+                      f"({extent:.4g} mm): the proxy spheres overlap the whole volume. Choose a proxy radius below "
+                      f"the pixel footprint in object space (write_particles_ply proxy_radius_mm, e.g. 0.01-0.05 mm).",
+                      MitpivWarning, stacklevel=3)
+
+
 def load_scene(xml_path, *, frame: int = 0, params: dict | None = None):
     """Load a scene XML for one frame and bind mitpiv's plugins.
 
@@ -166,9 +186,10 @@ def load_scene(xml_path, *, frame: int = 0, params: dict | None = None):
                 f"particles for this frame (see the scene's README) or choose frames that exist."
             )
         try:
-            read_particles_ply(pf)
+            ply = read_particles_ply(pf)
         except FileFormatError as e:
             raise ConfigError(f"frame {frame}: {e}") from None
+        _check_proxy(ply, pf)
     try:
         scene = mi.load_file(str(xml_path), optimize=False, **values)  # no sensor merging (module docstring)
     except MitpivError:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import difflib
 import inspect
+import json
 import tomllib
 import types
 import typing
@@ -30,9 +31,11 @@ __all__ = ["Table", "Vec3", "model_from_signature", "validate", "format_errors",
 
 
 class Table(BaseModel):
-    """Base of every experiment table: frozen, unknown keys forbidden."""
+    """Base of every experiment table: frozen, unknown keys forbidden, numbers finite (no
+    NaN or infinity). :func:`validate` checks types strictly (a string is not a number, a
+    fractional number not an integer, a boolean neither)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True, allow_inf_nan=False)
 
 
 Vec3 = Annotated[tuple[float, float, float], Field(description="three numbers (x, y, z)")]
@@ -44,9 +47,12 @@ def read_toml(path, what: str = "experiment") -> dict:
     if not path.is_file():
         raise ConfigError(f"{what} file {str(path)!r} does not exist.")
     try:
-        return tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{what} file {str(path)!r} is not valid TOML: {e}.") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{what} file {str(path)!r} is not a TOML text file (byte {e.start} is not UTF-8 text); "
+                          f"give the experiment's .toml file.") from None
 
 
 # ------------------------------------------------------------------ models from signatures
@@ -233,9 +239,24 @@ def _looks_like_label(part: str) -> bool:
 
 
 def validate(model: type[BaseModel], raw: Mapping, *, source: str = "experiment") -> BaseModel:
-    """``model.model_validate(raw)``, with pydantic's errors turned into one :class:`ConfigError`."""
+    """``raw`` validated against ``model`` in pydantic's strict mode (as JSON: a TOML array
+    is a tuple where the field is one), with pydantic's errors turned into one
+    :class:`ConfigError`. Strict: ``"0.1"`` is not a number, ``2.5`` or ``true`` not an
+    integer, ``1`` not a boolean; an integer is a valid number."""
+
+    def plain(value, where: str):
+        if isinstance(value, Mapping):
+            return {k: plain(v, f"{where}.{k}" if where else str(k)) for k, v in value.items()}
+        if isinstance(value, list | tuple):
+            return [plain(v, f"{where}[{i}]") for i, v in enumerate(value)]
+        if value is None or isinstance(value, str | int | float | bool):
+            return value
+        raise ConfigError(f"{source}: {where} = {value!r} is a {type(value).__name__}; experiment values are "
+                          f"numbers, strings, booleans, arrays or tables (no dates or times).")
+
     try:
-        return model.model_validate(dict(raw))
+        text = json.dumps(plain(raw, ""), allow_nan=True)
+        return model.model_validate_json(text, strict=True)
     except ValidationError as e:
         raise ConfigError(format_errors(e, model, raw, source=source)) from None
 

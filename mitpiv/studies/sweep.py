@@ -74,6 +74,10 @@ def load_study(path, *, full: bool = False) -> dict:
     unknown = set(st) - _STUDY_KEYS
     if unknown:
         raise ConfigError(f"study {path.name}: unknown key(s) {sorted(unknown)}; expected {sorted(_STUDY_KEYS)}.")
+    w = st.get("workers")
+    if w is not None and (isinstance(w, bool) or not isinstance(w, int) or not 1 <= w <= 512):
+        raise ConfigError(f"study {path.name}: workers = {w!r} must be a whole number in [1, 512] (local Dask worker "
+                          f"processes); leave it out for 2.")
     if "experiment" not in st:
         raise ConfigError(f"study {path.name}: name the base experiment: experiment = \"experiment.toml\".")
     exp = (path.parent / st["experiment"]).resolve()

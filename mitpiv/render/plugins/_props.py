@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import mitsuba as mi
 
 from mitpiv.errors import ConfigError
@@ -27,6 +29,9 @@ class PropertyReader:
 
     def float(self, name: str, default=None):
         v = self._get(name, default, (int, float), "a number")
+        if v is not None and not math.isfinite(v):
+            raise ConfigError(f"{self.owner}: parameter '{name}' must be a finite number, got {v!r}. Give a real value "
+                              f"(or leave the parameter out for its default).")
         return None if v is None else float(v)
 
     def int(self, name: str, default=None):
@@ -51,6 +56,8 @@ class PropertyReader:
             out = [float(v[i]) for i in range(3)]
         except Exception:
             raise ConfigError(f"{self.owner}: parameter '{name}' must be a 3-vector, got {v!r}.") from None
+        if not all(math.isfinite(x) for x in out):
+            raise ConfigError(f"{self.owner}: parameter '{name}' must be three finite numbers, got {out}.")
         return out
 
     def object(self, name: str, default=None):

@@ -134,6 +134,15 @@ class MiePhase(mi.PhaseFunction):
         if k < 0:
             raise ConfigError(f"mie: 'index_imag' must be >= 0 (the index is n + ik), got {k!r}.")
         self.m_particle = complex(check_positive("index", n, owner="mie"), k)
+        if n < 1.0 and k < 1.0:
+            import warnings
+
+            from mitpiv.errors import MitpivWarning
+
+            warnings.warn(f"mie: particle 'index' = {n:g} (absorption {k:g}) is below 1: no dielectric has a "
+                          f"refractive index < 1 at optical wavelengths (metals do, with 'index_imag' > 1). For a "
+                          f"bubble or a particle less dense than its medium give the medium's index as "
+                          f"'medium_index' and the particle's own (absolute) index.", MitpivWarning, stacklevel=2)
         if dlist is not None:
             if d is not None or gstd is not None:
                 raise ConfigError("mie: give either 'diameters_um' (with 'weights') or 'diameter_um' (with 'geometric_std'), not both.")

@@ -27,7 +27,10 @@ against the flow), ``report`` (report.md and figures, :mod:`mitpiv.studies.repor
 
 from __future__ import annotations
 
+import difflib
+import math
 import os
+import re
 import shutil
 from functools import cache
 from pathlib import Path
@@ -36,6 +39,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
+from mitpiv.costs import MAX_ITERATIONS
 from mitpiv.errors import ConfigError
 from mitpiv.studies.runner import RENDER_PACKAGES, Kind, Stage, StageContext
 from mitpiv.studies.schema import Table, Vec3, discriminated, model_from_signature
@@ -53,6 +57,22 @@ class SceneTable(Table):
     xml: str = Field(..., description="scene XML file (relative to the experiment file)")
     params: dict[str, str | int | float | bool] = Field(
         default_factory=dict, description="$name substitutions of the scene XML")
+
+    @model_validator(mode="after")
+    def _known_params(self):
+        """Every param must be a $name of the scene XML (a typo would otherwise change nothing)."""
+        try:
+            text = Path(self.xml).read_text(encoding="utf-8", errors="replace")
+        except OSError:
+            return self  # a missing file is reported where it is resolved (prepare)
+        names = set(re.findall(r"\$(\w+)", text)) | set(re.findall(r"<default\s+name=\"(\w+)\"", text)) | {"truth"}
+        unknown = sorted(set(self.params) - names)
+        if unknown:
+            hints = [f"{k!r}" + (f" (did you mean {close[0]!r}?)" if (close := difflib.get_close_matches(
+                k, sorted(names), n=1, cutoff=0.6)) else "") for k in unknown]
+            raise ValueError(f"params {', '.join(hints)} not used by {Path(self.xml).name}, whose $parameters are "
+                             f"{sorted(names - {'truth'})}; a parameter the scene does not use changes nothing")
+        return self
 
 
 class SeedingTable(Table):
@@ -84,6 +104,16 @@ class SeedingTable(Table):
         if any(hi <= lo for lo, hi in zip(self.box_min_mm, self.box_max_mm, strict=True)):
             raise ValueError(f"box_max_mm {list(self.box_max_mm)} must exceed box_min_mm {list(self.box_min_mm)} "
                              "on every axis")
+        half = 0.5 * min(hi - lo for lo, hi in zip(self.box_min_mm, self.box_max_mm, strict=True))
+        if self.proxy_radius_mm >= half:
+            raise ValueError(f"proxy_radius_mm = {self.proxy_radius_mm} mm is not smaller than half the seeding box "
+                             f"({half:g} mm): every particle's proxy sphere would fill the volume. Choose it below the "
+                             f"pixel footprint in object space (e.g. 0.01-0.05 mm)")
+        if self.count is not None:
+            from mitpiv import costs
+
+            costs.check_memory(costs.particles_cost(self.count), what=f"count = {self.count}",
+                               fix="seed fewer particles (count, concentration_per_mm3 or ppp)", quiet=True)
         return self
 
 
@@ -131,7 +161,8 @@ class ReconstructionTable(Table):
         ..., description="volume [xmin, xmax, ymin, ymax, zmin, zmax] [mm]")
     voxel_mm: PosFloat | tuple[PosFloat, PosFloat, PosFloat] = Field(
         ..., description="voxel size [mm]: one (cubic) or [dx, dy, dz]")
-    iterations: Annotated[int, Field(ge=1)] = Field(5, description="MART / SMART / DRT-MART iterations")
+    iterations: Annotated[int, Field(ge=1, le=MAX_ITERATIONS)] = Field(
+        5, description="MART / SMART / DRT-MART iterations")
     mu: Annotated[float, Field(gt=0, lt=2)] = Field(1.0, description="MART relaxation")
     weights: Literal["circle", "gaussian"] = Field("circle", description="MART pixel-voxel weights")
     interpolation: Literal["linear", "cubic"] = Field("linear", description="image interpolation")
@@ -149,6 +180,13 @@ class ReconstructionTable(Table):
         b = self.bounds_mm
         if not (b[0] < b[1] and b[2] < b[3] and b[4] < b[5]):
             raise ValueError(f"bounds_mm {list(b)} must be [xmin, xmax, ymin, ymax, zmin, zmax] with min < max")
+        from mitpiv import costs
+
+        vox = self.voxel_mm if isinstance(self.voxel_mm, tuple) else (self.voxel_mm,) * 3
+        n = math.prod((b[2 * i + 1] - b[2 * i]) / vox[i] for i in range(3))
+        costs.check_memory(costs.reconstruction_cost(n, iterations=self.iterations, method=self.method),
+                           what=f"voxel_mm = {self.voxel_mm} on bounds_mm = {list(b)}",
+                           fix="use larger voxels or smaller bounds", quiet=True)
         return self
 
 
@@ -180,6 +218,21 @@ class ParticlesTable(Table):
     radius_voxels: PosFloat = Field(2.0, description="matching search radius [voxels]")
 
 
+class _Experiment(Table):
+    """Checks across tables: the cost of the PIV on the reconstruction grid."""
+
+    @model_validator(mode="after")
+    def _piv_cost(self):
+        from mitpiv import costs
+
+        shape = grid_of(self).shape
+        costs.check_memory(costs.piv_cost(shape, self.piv.windows, self.piv.overlap),
+                           what=f"[piv] windows = {list(self.piv.windows)}, overlap = {self.piv.overlap} on a "
+                                f"{shape[2]}x{shape[1]}x{shape[0]} grid",
+                           fix="use a smaller overlap or larger windows", quiet=True)
+        return self
+
+
 @cache
 def schema():
     """The tomo experiment model (built once: the flow and sensor tables come from the physics)."""
@@ -199,7 +252,7 @@ def schema():
         "piv": (PivTable, Field(default_factory=PivTable, description="3D PIV")),
         "particles": (ParticlesTable, Field(default_factory=ParticlesTable, description="particle evaluation")),
     }
-    model = create_model("TomoExperiment", __base__=Table,
+    model = create_model("TomoExperiment", __base__=_Experiment,
                          __doc__="A particle-image experiment: seeding, flow, render, reconstruction, "
                                  "particles, 3D PIV.", **fields)
     return model
@@ -403,12 +456,17 @@ def source_of(cfg) -> str:
 
 
 def stage_reconstruct(ctx: StageContext) -> dict:
+    from mitpiv import costs
     from mitpiv.io import write_volume
     from mitpiv.reconstruct.images import reconstruct_images
 
     cfg = ctx.cfg
     r = cfg.reconstruction
     grid = grid_of(cfg)
+    costs.check_memory(costs.reconstruction_cost(grid.n_voxels, n_images=len(list((ctx.run_dir / source_of(cfg)).glob("*_frame000.exr"))),
+                                                 iterations=r.iterations, method=r.method),
+                       what=f"[reconstruction] {r.method} on {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]} voxels, "
+                            f"per frame", fix="use larger voxels or smaller bounds")
     info = {}
     for frame in FRAMES:
         imgs, metas, _ = images(ctx.run_dir, frame, source_of(cfg))
@@ -514,6 +572,11 @@ def stage_piv(ctx: StageContext) -> dict:
     truth = read_truth(ctx.input("particles", "truth.npz"))
     dt = float(truth["times_s"][1] - truth["times_s"][0])
     pv = cfg.piv
+    from mitpiv import costs
+
+    costs.check_memory(costs.piv_cost(grid.shape, pv.windows, pv.overlap),
+                       what=f"[piv] windows = {list(pv.windows)}, overlap = {pv.overlap}",
+                       fix="use a smaller overlap or larger windows")
     field = analysis.piv3d(volume(ctx.run_dir, 0), volume(ctx.run_dir, 1), grid, windows=pv.windows,
                            overlap=pv.overlap, deform=pv.deform, interpolation=pv.interpolation,
                            normalised=pv.normalised, correlation=pv.correlation, threshold=pv.threshold,

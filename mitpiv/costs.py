@@ -1,0 +1,187 @@
+"""Up-front cost estimates of the expensive knobs: the memory and time a reconstruction
+(voxels x cameras x iterations), a focal stack (planes), 3D PIV (vectors) or a seeding
+(particles) will take, checked before any work starts.
+
+A run whose *certain* memory (the arrays it must hold at once: a lower bound) exceeds the
+memory available now is refused with a :class:`~mitpiv.errors.ConfigError` that names the
+knob, the estimate and the fix; the rest is logged (``mitpiv.costs``) so that a long run
+says up front how long it will take. The time figures are rough orders of magnitude
+(throughputs measured on a 2-core development machine, written below with each model);
+they guide, they do not promise.
+
+Hand-written: a handful of formulas; the available memory comes from psutil when it is
+installed, else ``/proc/meminfo`` (Linux) or ``os.sysconf``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+from mitpiv.errors import ConfigError
+
+__all__ = ["Cost", "available_memory_bytes", "check_memory", "check_disk", "human_bytes", "human_seconds",
+           "reconstruction_cost", "focal_stack_cost", "piv_cost", "piv_vectors", "particles_cost", "MEMORY_FRACTION",
+           "MAX_ITERATIONS"]
+
+log = logging.getLogger(__name__)
+
+#: Most iterations a reconstruction takes (MART / SMART converge in 5-50; far more is a typo).
+MAX_ITERATIONS = 10_000
+
+#: Share of the available memory a single array set may take before it is refused.
+MEMORY_FRACTION = 0.8
+
+# Throughputs (orders of magnitude, 2-core development machine, numba kernels):
+#: MART / SMART: voxel-camera updates per second per iteration.
+MART_VOXEL_CAMERA_PER_S = 5e7
+#: Refocusing: light-field samples (s, t, u, v) gathered per second per plane.
+REFOCUS_SAMPLES_PER_S = 2e8
+#: 3D PIV: correlation-window voxels (FFT of (2w)^3 per vector) per second.
+PIV_VOXELS_PER_S = 2e8
+#: Seeding and advection: particles per second.
+PARTICLES_PER_S = 5e6
+
+
+@dataclass(frozen=True)
+class Cost:
+    """An estimate: ``memory_bytes`` the run must hold at once (a lower bound), ``seconds``
+    (order of magnitude), ``disk_bytes`` written, and what it counts (``items``, e.g.
+    "12.8 M voxels")."""
+
+    memory_bytes: float
+    seconds: float
+    items: str
+    disk_bytes: float = 0.0
+
+    def __str__(self) -> str:
+        disk = f", {human_bytes(self.disk_bytes)} on disk" if self.disk_bytes else ""
+        return f"{self.items}: about {human_bytes(self.memory_bytes)} of memory{disk}, ~{human_seconds(self.seconds)}"
+
+
+def human_bytes(n: float) -> str:
+    n = float(n)
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if abs(n) < 1024 or unit == "PiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} PiB"  # pragma: no cover
+
+
+def human_seconds(s: float) -> str:
+    s = float(s)
+    if s < 60:
+        return f"{s:.2g} s"
+    if s < 3600:
+        return f"{s / 60:.2g} min"
+    if s < 86400 * 2:
+        return f"{s / 3600:.2g} h"
+    return f"{s / 86400:.3g} days"
+
+
+def available_memory_bytes() -> int:
+    """Memory available to a new allocation now [bytes] (psutil, /proc/meminfo or sysconf)."""
+    try:
+        import psutil
+
+        return int(psutil.virtual_memory().available)
+    except ImportError:
+        pass
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - no way to tell: do not refuse
+        return 2**62
+
+
+def check_memory(cost: Cost, *, what: str, fix: str, available: int | None = None, quiet: bool = False) -> Cost:
+    """Raise :class:`ConfigError` when ``cost.memory_bytes`` exceeds ``MEMORY_FRACTION`` of
+    the available memory, naming ``what`` (the knob and its value) and ``fix``; otherwise
+    log the estimate (info; a warning above an hour; debug only with ``quiet``, for checks
+    that run again later, such as validating an experiment) and return ``cost``."""
+    avail = available_memory_bytes() if available is None else int(available)
+    if not math.isfinite(cost.memory_bytes) or cost.memory_bytes > MEMORY_FRACTION * avail:
+        raise ConfigError(f"{what}: {cost.items} need at least {human_bytes(cost.memory_bytes)} of memory, more than "
+                          f"the {human_bytes(avail)} available on this machine; {fix}.")
+    if quiet:
+        log.debug("estimate for %s: %s", what, cost)
+        return cost
+    log.info("estimate for %s: %s", what, cost)
+    if cost.seconds > 3600:
+        log.warning("%s will take long: %s (Ctrl-C stops it; finished stages are kept)", what, cost)
+    return cost
+
+
+def check_disk(cost: Cost, folder, *, what: str, fix: str) -> Cost:
+    """Raise :class:`ConfigError` when ``cost.disk_bytes`` exceed the free space of ``folder``."""
+    folder = Path(folder)
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    free = shutil.disk_usage(folder).free
+    if not math.isfinite(cost.disk_bytes) or cost.disk_bytes > free:
+        raise ConfigError(f"{what}: {cost.items} need {human_bytes(cost.disk_bytes)} on disk, more than the "
+                          f"{human_bytes(free)} free in {str(folder)!r}; {fix}.")
+    return cost
+
+
+def _count(n: float) -> str:
+    n = float(n)
+    for div, unit in ((1e12, "T"), (1e9, "G"), (1e6, "M"), (1e3, "k")):
+        if n >= div:
+            return f"{n / div:.3g} {unit}"
+    return f"{n:.0f}"
+
+
+def reconstruction_cost(n_voxels: float, *, n_images: int = 1, iterations: int = 1, method: str = "mart") -> Cost:
+    """A volume reconstruction: the float32 volume, its float64 working copy and the
+    candidate mask (13 bytes per voxel, held at once: the lower bound); time from the
+    voxel-camera updates of ``iterations`` MART sweeps (one sweep for MLOS / SAPIV)."""
+    n_voxels = float(n_voxels)
+    sweeps = max(int(iterations), 1) if method in ("mart", "smart", "drt-mart") else 1
+    return Cost(memory_bytes=13.0 * n_voxels, seconds=n_voxels * max(n_images, 1) * (sweeps + 1) / MART_VOXEL_CAMERA_PER_S,
+                items=f"{_count(n_voxels)} voxels x {n_images} image(s) x {sweeps} iteration(s)")
+
+
+def focal_stack_cost(n_planes: float, plane_shape, *, n_samples_per_plane: float | None = None) -> Cost:
+    """A focal stack streamed to disk: float32 planes on disk, one plane and its weights in
+    memory; time from the light-field samples gathered per plane."""
+    px = float(math.prod(plane_shape))
+    n_planes = float(n_planes)
+    samples = n_samples_per_plane if n_samples_per_plane is not None else px
+    return Cost(memory_bytes=16.0 * px, seconds=n_planes * samples / REFOCUS_SAMPLES_PER_S,
+                items=f"{_count(n_planes)} plane(s) of {_count(px)} px", disk_bytes=4.0 * px * n_planes)
+
+
+def piv_vectors(grid_shape, window: int, overlap: float) -> int:
+    """Vectors of one PIV pass: windows of ``window`` voxels stepped by ``window * (1 - overlap)``."""
+    step = max(1, int(round(window * (1.0 - overlap))))
+    return int(math.prod(max(0, (int(n) - window) // step + 1) for n in grid_shape))
+
+
+def piv_cost(grid_shape, windows, overlap: float) -> Cost:
+    """Multi-pass 3D PIV: the vector fields of the last pass (positions, velocities,
+    flags: 80 bytes a vector) and one (2w)^3 complex correlation per vector of the largest
+    batch; time from the correlation voxels of every pass."""
+    ws = [max(w) if isinstance(w, tuple | list) else int(w) for w in windows]
+    n = [piv_vectors(grid_shape, w, overlap) for w in ws]
+    vox = sum(k * (2 * w) ** 3 for k, w in zip(n, ws, strict=True))
+    return Cost(memory_bytes=80.0 * max(n) + 16.0 * (2 * max(ws)) ** 3, seconds=vox * 3 / PIV_VOXELS_PER_S,
+                items=f"{_count(max(n))} vectors per pass x {len(ws)} pass(es)")
+
+
+def particles_cost(count: float, *, frames: int = 2) -> Cost:
+    """Seeding, advection and the PLY files of ``count`` particles: float64 positions of
+    every frame, the diameters and one float32 PLY record (56 bytes) each."""
+    count = float(count)
+    return Cost(memory_bytes=count * (24.0 * frames + 8.0 + 56.0), seconds=count * frames / PARTICLES_PER_S,
+                items=f"{_count(count)} particles", disk_bytes=56.0 * count * frames)
