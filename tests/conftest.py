@@ -20,3 +20,11 @@ try:
     mitpiv.set_variant()
 except mitpiv.BackendError:  # pragma: no cover - no rendering backend on this machine
     pass  # the NumPy tests still run; every rendering test fails with this error (ensure_variant raises it)
+
+try:  # property tests (Hypothesis): the same examples on every run, so CI is reproducible
+    from hypothesis import settings as _hyp_settings
+
+    _hyp_settings.register_profile("mitpiv", derandomize=True, database=None)
+    _hyp_settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "mitpiv"))
+except ImportError:  # pragma: no cover - hypothesis is in the test extra
+    pass

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import shutil
 import zipfile
 from dataclasses import dataclass
@@ -518,7 +519,7 @@ SCHEMA_FIELDS = {
 def _in_range(v, kind, lo, hi, lo_open, hi_open):
     if isinstance(v, bool) or not isinstance(v, int | float) or (kind is int and not isinstance(v, int)):
         return False
-    if not np.isfinite(v):
+    if not math.isfinite(v):  # math: Python ints beyond int64 too
         return False
     return not ((lo is not None and (v < lo or (lo_open and v == lo))) or
                 (hi is not None and (v > hi or (hi_open and v == hi))))
