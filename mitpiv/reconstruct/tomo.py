@@ -665,7 +665,7 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
             smart_sweep(cams, flat, vol, wsum, float(mu), proj, lr)
         else:
             for cw, f in zip(cams, flat, strict=True):
-                k["mart_camera"](cw.indptr, cw.indices, cw.data, f, cw.width, cw.span, vol, float(mu))
+                k["mart_camera_f32"](cw.indptr, cw.indices, cw.data, f, cw.width, cw.span, vol, float(mu))
         if return_info and (residuals == "each" or it == iterations - 1):
             res.append(_residual(cams, flat, proj, vol, k) / norm)
         log.debug("%s: iteration %d/%d, %.1f s", what, it + 1, iterations, time.perf_counter() - t1)
@@ -714,10 +714,11 @@ TOMO_METHODS = ("mlos", "mart", "smart", "sapiv")
 def reconstruct_volume(images, mappings, grid: VoxelGrid, method: str = "mart", *, iterations: int = 5, mu: float = 1.0,
                        weights: str = "circle", interpolation: str = "linear", preprocess: float | None = None,
                        combine: str = "multiplicative", threshold_k: float | None = 3.0,
-                       progress: Progress = None) -> tuple[np.ndarray, dict]:
+                       progress: Progress = None, cache: WeightCache | None = None) -> tuple[np.ndarray, dict]:
     """One entry point for the camera-image methods (``mlos``, ``mart``, ``smart``,
     ``sapiv``, the latter combining by ``combine`` with per-plane ``threshold_k``); returns
-    (volume, info), info from :func:`mart` or empty."""
+    (volume, info), info from :func:`mart` (the final residual only) or empty. ``cache``: a
+    :class:`WeightCache` shared by the frames of one experiment (MART/SMART)."""
     if method == "mlos":
         return mlos(images, mappings, grid, interpolation=interpolation, progress=progress), {}
     if method == "sapiv":
@@ -725,5 +726,6 @@ def reconstruct_volume(images, mappings, grid: VoxelGrid, method: str = "mart", 
                              threshold_k=threshold_k, progress=progress), {}
     if method in ("mart", "smart"):
         return mart(images, mappings, grid, iterations=iterations, mu=mu, smart=method == "smart", weights=weights,
-                    interpolation=interpolation, preprocess=preprocess, progress=progress, return_info=True)
+                    interpolation=interpolation, preprocess=preprocess, progress=progress, return_info=True,
+                    cache=cache, residuals="final")
     raise ConfigError(f"reconstruct: method={method!r} is not one of {TOMO_METHODS}.")
