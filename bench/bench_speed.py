@@ -65,7 +65,7 @@ def emit(stage, ours, base_name, base, accuracy, note=""):
 def mart_case(scale, ppp=0.05, seed=0):
     half = (24.0 * scale, 16.0 * scale, 6.5)
     res = (max(32, int(640 * scale)), max(32, int(480 * scale)))
-    cams, pts, imgs = setup(res, half, ppp, seed=seed, dist=1000.0 * scale)
+    cams, pts, imgs = setup(res, half, ppp, seed=seed, dist=1000.0)
     grid = rc.VoxelGrid.from_bounds(-np.asarray(half), half, 0.1)
     return cams, pts, imgs, grid
 
@@ -128,7 +128,7 @@ def mart_rows(scale, iterations):
          f"{info['active_voxels'] / 1e6:.2f} M active voxels, weights {info['weight_bytes'] / 2**20:.0f} MiB, "
          f"MART memory {info['memory_bytes'] / 2**20:.0f} MiB = {info['memory_bytes'] / grid.n_voxels:.1f} B per grid "
          f"voxel ({info['memory_bytes'] / max(info['active_voxels'], 1):.0f} B per active voxel); peak RSS {rss:.2f} GiB")
-    (v2, setup_s, iter_s), t2, c2 = timed(scipy_mart, imgs, cams, grid, iterations)
+    (v2, setup_s, iter_s), t2, c2 = timed(scipy_mart, cams, imgs, grid, iterations)
     diff2 = float(np.max(np.abs(v1.astype(np.float64) - v2)) / max(float(v2.max()), 1e-30))
     emit(label, t1, "scipy.sparse MART, same weights", t2, f"Q {q1:.4f} vs {an.quality_q(v2, truth):.4f}; "
          f"max |diff| {diff2:.1e} of max", f"its iterations {iter_s:.1f} s vs ours {info['iterate_s']:.1f} s")
