@@ -21,7 +21,14 @@ pixel area), and ``"gaussian"``, the voxel's projected box covariance ``J diag(d
 J^T`` widened by an isotropic PSF of ``psf_sigma_px`` (weight = projected area x Gaussian
 density at the pixel centre, truncated at 3 sigma). Weights are never stored as a dense
 matrix: they are computed once per camera for the voxels that survive pruning and kept
-as a CSR matrix (pixels x active voxels, float32).
+as a CSR matrix (pixels x active voxels, float32); a :class:`WeightCache` keeps them for the
+next frame of the same cameras and grid (the experiment runner shares one across frames).
+
+Speed (issue 26): for pinhole mappings the MLOS pass, the projections and the weight
+footprints run in compiled kernels (``_kernels.py``; hand-written because they fuse the
+camera model with the sampling and no library offers that), the CSR assembly reads
+bucket-sorted footprints, and the MART sweep evaluates its factor in single precision.
+The pre-issue code path is kept as the benchmark baseline in bench/reference_mart.py.
 """
 
 from __future__ import annotations
