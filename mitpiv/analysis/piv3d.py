@@ -16,6 +16,12 @@ peak plus a 3-point Gaussian sub-voxel estimator per axis (parabolic where a nei
 is <= 0); the peak ratio (primary over the highest value outside a (2 width + 1)^3 box
 around it) as the signal-to-noise measure. Windows of zero variance are flagged invalid
 (displacement 0, never NaN).
+
+Hand-written compiled kernels (Numba; issue 26): the trilinear and cubic B-spline
+deformation (the cubic coefficients prefiltered once per volume by scipy.ndimage and
+shared by all passes; SciPy's map_coordinates would re-filter every pass and take float32
+coordinates), the gathering of mean-subtracted window stacks and the peak / second-peak
+search. The FFTs are scipy.fft's batched real-to-complex transforms with workers.
 """
 
 from __future__ import annotations
