@@ -269,15 +269,22 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="smaller cases (a few minutes)")
     ap.add_argument("--scale", type=float, default=None, help="MART lateral scale (1 = 480x320x130)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks.md"))
+    ap.add_argument("--sections", default="mart,piv,focal,big,scaling", help="comma-separated subset to run")
     a = ap.parse_args(argv)
     scale = a.scale or (0.3 if a.quick else 0.5)
     print("| stage | ours | baseline | baseline time | ratio | accuracy | notes |")
     print("|---|---|---|---|---|---|---|")
-    mart_rows(scale, 10 if a.quick else 40)
-    piv_rows((48, 160, 160) if a.quick else (80, 256, 256))
-    focal_rows(800 if a.quick else 1600, 11 if a.quick else 21)
-    big_stack_row(600 if a.quick else 1100, 5 if a.quick else 10)
-    scaling(a.quick)
+    sections = set(a.sections.split(","))
+    if "mart" in sections:
+        mart_rows(scale, 10 if a.quick else 40)
+    if "piv" in sections:
+        piv_rows((64, 160, 160) if a.quick else (80, 256, 256))
+    if "focal" in sections:
+        focal_rows(800 if a.quick else 1600, 11 if a.quick else 21)
+    if "big" in sections:
+        big_stack_row(600 if a.quick else 1100, 5 if a.quick else 10)
+    if "scaling" in sections:
+        scaling(a.quick)
     text = ("# Benchmarks (issue 26)\n\nWritten by `python bench/bench_speed.py"
             + (" --quick" if a.quick else "") + f"` (`make bench`). Machine: {machine()}.\n\n"
             "The machine is shared with other jobs: absolute times are noisy; each ratio compares two "
