@@ -282,7 +282,7 @@ def main(argv=None):
     if "focal" in sections:
         focal_rows(800 if a.quick else 1600, 11 if a.quick else 21)
     if "big" in sections:
-        big_stack_row(600 if a.quick else 1100, 5 if a.quick else 10)
+        big_stack_row(1600 if a.quick else 3300, 16 if a.quick else 32)
     if "scaling" in sections:
         scaling(a.quick)
     text = ("# Benchmarks (issue 26)\n\nWritten by `python bench/bench_speed.py"
