@@ -216,6 +216,8 @@ def big_stack_row(crop_px, planes_timed):
 # ------------------------------------------------------------------------------ scaling
 def scaling(quick):
     print("\n### Scaling\n")
+    small = mart_case(0.1)
+    rc.mart(small[2], small[0], small[3], iterations=1)  # compile / load the kernels outside the timings
     sizes, times = [], []
     for s in ((0.15, 0.2, 0.3, 0.4) if quick else (0.25, 0.35, 0.5, 0.7)):
         cams, pts, imgs, grid = mart_case(s)
