@@ -18,6 +18,7 @@ lint: setup
 	.venv/bin/ruff check mitpiv tests bench scenes
 
 bench: setup
+	$(PY) bench/bench_speed.py --quick
 	$(PY) bench/bench_cameras.py
 	$(PY) bench/bench_mie.py
 	$(PY) bench/bench_optics.py

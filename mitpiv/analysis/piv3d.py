@@ -16,6 +16,12 @@ peak plus a 3-point Gaussian sub-voxel estimator per axis (parabolic where a nei
 is <= 0); the peak ratio (primary over the highest value outside a (2 width + 1)^3 box
 around it) as the signal-to-noise measure. Windows of zero variance are flagged invalid
 (displacement 0, never NaN).
+
+Hand-written compiled kernels (Numba; issue 26): the trilinear and cubic B-spline
+deformation (the cubic coefficients prefiltered once per volume by scipy.ndimage and
+shared by all passes; SciPy's map_coordinates would re-filter every pass and take float32
+coordinates), the gathering of mean-subtracted window stacks and the peak / second-peak
+search. The FFTs are scipy.fft's batched real-to-complex transforms with workers.
 """
 
 from __future__ import annotations
@@ -180,11 +186,12 @@ def _resample(field_zyx3, c_old, c_new):
 
 
 _KERNELS = {}
+SPLINE_PAD = 12  # zero padding before the cubic B-spline prefilter (scipy.ndimage's, mode "grid-constant")
 
 
-def _warp_kernel():
+def _warp_kernels():
     if _KERNELS:
-        return _KERNELS["warp"]
+        return _KERNELS
     from mitpiv._numba import numba
 
     nb = numba()
@@ -223,28 +230,155 @@ def _warp_kernel():
                                 acc += wz * wy * (fx if dx else 1.0 - fx) * vol[zz, yy, xx]
                     out[k, j, i] = acc
 
-    _KERNELS["warp"] = warp
-    return warp
+    @nb.njit(inline="always", cache=True)
+    def bspline3(t, w):
+        """Cubic B-spline weights of the taps floor(x) - 1 .. floor(x) + 2 at fraction t."""
+        s = 1.0 - t
+        w[0] = s * s * s / 6.0
+        w[1] = (3.0 * t * t * t - 6.0 * t * t + 4.0) / 6.0
+        w[2] = (-3.0 * t * t * t + 3.0 * t * t + 3.0 * t + 1.0) / 6.0
+        w[3] = t * t * t / 6.0
+
+    @nb.njit(parallel=True, cache=True)
+    def warp_cubic(coef, pad, disp, sign, out):
+        """out[x] = f(x + sign * disp[x] / 2) of the cubic B-spline with coefficients
+        ``coef`` (the volume zero-padded by ``pad`` and prefiltered, as
+        scipy.ndimage.map_coordinates(order=3, mode="grid-constant") does); taps outside
+        the coefficient array count as 0."""
+        nz, ny, nx = out.shape
+        cz, cy, cx = coef.shape
+        for k in nb.prange(nz):
+            wz = np.empty(4)
+            wy = np.empty(4)
+            wx = np.empty(4)
+            for j in range(ny):
+                for i in range(nx):
+                    z = k + 0.5 * sign * disp[k, j, i, 2] + pad
+                    y = j + 0.5 * sign * disp[k, j, i, 1] + pad
+                    x = i + 0.5 * sign * disp[k, j, i, 0] + pad
+                    z0 = int(math.floor(z))
+                    y0 = int(math.floor(y))
+                    x0 = int(math.floor(x))
+                    bspline3(z - z0, wz)
+                    bspline3(y - y0, wy)
+                    bspline3(x - x0, wx)
+                    acc = 0.0
+                    for a in range(4):
+                        zz = z0 - 1 + a
+                        if zz < 0 or zz >= cz:
+                            continue
+                        sy = 0.0
+                        for b in range(4):
+                            yy = y0 - 1 + b
+                            if yy < 0 or yy >= cy:
+                                continue
+                            sx = 0.0
+                            for c in range(4):
+                                xx = x0 - 1 + c
+                                if 0 <= xx < cx:
+                                    sx += wx[c] * coef[zz, yy, xx]
+                            sy += wy[b] * sx
+                        acc += wz[a] * sy
+                    out[k, j, i] = acc
+
+    @nb.njit(parallel=True, cache=True)
+    def windows(padded, starts, wz, wy, wx, out, energy):
+        """Mean-subtracted windows of ``padded`` at integer starts (n, 3) (z, y, x): the mean
+        in float64, the result rounded to float32, its energy summed in float64."""
+        n = starts.shape[0]
+        inv = 1.0 / (wz * wy * wx)
+        for q in nb.prange(n):
+            z0, y0, x0 = starts[q, 0], starts[q, 1], starts[q, 2]
+            acc = 0.0
+            for a in range(wz):
+                for b in range(wy):
+                    for c in range(wx):
+                        acc += padded[z0 + a, y0 + b, x0 + c]
+            m = acc * inv
+            e = 0.0
+            for a in range(wz):
+                for b in range(wy):
+                    for c in range(wx):
+                        v = np.float32(padded[z0 + a, y0 + b, x0 + c] - m)
+                        out[q, a, b, c] = v
+                        e += np.float64(v) * np.float64(v)
+            energy[q] = e
+
+    @nb.njit(parallel=True, cache=True)
+    def peaks(corr, width, idx, nbr, second):
+        """Per window: the first maximum (idx: k, j, i; nbr: its value and the (lower,
+        upper) neighbours along x, y, z, circular) and the highest value outside the
+        circular (2 width + 1)^3 box around it (-inf when nothing is outside)."""
+        n, wz, wy, wx = corr.shape
+        for q in nb.prange(n):
+            best = -np.inf
+            bk = 0
+            bj = 0
+            bi = 0
+            for k in range(wz):
+                for j in range(wy):
+                    for i in range(wx):
+                        v = corr[q, k, j, i]
+                        if v > best:
+                            best = v
+                            bk = k
+                            bj = j
+                            bi = i
+            idx[q, 0] = bk
+            idx[q, 1] = bj
+            idx[q, 2] = bi
+            nbr[q, 0] = best
+            nbr[q, 1] = corr[q, bk, bj, (bi - 1) % wx]
+            nbr[q, 2] = corr[q, bk, bj, (bi + 1) % wx]
+            nbr[q, 3] = corr[q, bk, (bj - 1) % wy, bi]
+            nbr[q, 4] = corr[q, bk, (bj + 1) % wy, bi]
+            nbr[q, 5] = corr[q, (bk - 1) % wz, bj, bi]
+            nbr[q, 6] = corr[q, (bk + 1) % wz, bj, bi]
+            sec = -np.inf
+            for k in range(wz):
+                dk = abs(k - bk)
+                inz = min(dk, wz - dk) <= width
+                for j in range(wy):
+                    dj = abs(j - bj)
+                    iny = min(dj, wy - dj) <= width
+                    for i in range(wx):
+                        if inz and iny:
+                            di = abs(i - bi)
+                            if min(di, wx - di) <= width:
+                                continue
+                        v = corr[q, k, j, i]
+                        if v > sec:
+                            sec = v
+            second[q] = sec
+
+    _KERNELS.update(warp=warp, warp_cubic=warp_cubic, windows=windows, peaks=peaks)
+    return _KERNELS
 
 
-def _deform_pair(a, b, disp_xyz, interpolation):
-    """Both volumes resampled half a predictor apart: a(x - d/2), b(x + d/2) (disp per voxel,
-    (nz, ny, nx, 3) in x, y, z); trilinear (Numba) or cubic B-spline (SciPy, the base grid
-    of sample coordinates built once for both)."""
-    if interpolation == "linear":
-        d = disp_xyz.astype(np.float32)
-        out = (np.empty(a.shape, np.float32), np.empty(b.shape, np.float32))
-        _warp_kernel()(a, d, -1.0, out[0])
-        _warp_kernel()(b, d, +1.0, out[1])
-        return out
+def _spline_coefficients(vol):
+    """Cubic B-spline coefficients of a volume zero-padded by SPLINE_PAD voxels (float64),
+    computed once per volume and reused by every deformation pass."""
     from scipy import ndimage
 
-    nz, ny, nx = a.shape
-    base = np.stack(np.meshgrid(np.arange(nz, dtype=np.float32), np.arange(ny, dtype=np.float32),
-                                np.arange(nx, dtype=np.float32), indexing="ij"))
-    half = np.float32(0.5) * np.moveaxis(disp_xyz[..., ::-1].astype(np.float32), -1, 0)  # (z, y, x) first
-    return tuple(ndimage.map_coordinates(v, base + sign * half, order=3, mode="grid-constant", cval=0.0,
-                                         prefilter=True).astype(np.float32) for v, sign in ((a, -1), (b, 1)))
+    padded = np.pad(np.asarray(vol, dtype=np.float64), SPLINE_PAD, mode="constant", constant_values=0.0)
+    return ndimage.spline_filter(padded, order=3, output=np.float64, mode="grid-constant")
+
+
+def _deform_pair(a, b, disp_xyz, interpolation, coefs=None):
+    """Both volumes resampled half a predictor apart: a(x - d/2), b(x + d/2) (disp per voxel,
+    (nz, ny, nx, 3) in x, y, z); trilinear or cubic B-spline (``coefs``: the two volumes'
+    :func:`_spline_coefficients`, computed here when not given), compiled kernels."""
+    d = np.ascontiguousarray(disp_xyz, dtype=np.float32)
+    out = (np.empty(a.shape, np.float32), np.empty(b.shape, np.float32))
+    k = _warp_kernels()
+    if interpolation == "linear":
+        k["warp"](a, d, -1.0, out[0])
+        k["warp"](b, d, +1.0, out[1])
+        return out
+    ca, cb = coefs if coefs is not None else (_spline_coefficients(a), _spline_coefficients(b))
+    k["warp_cubic"](ca, SPLINE_PAD, d, -1.0, out[0])
+    k["warp_cubic"](cb, SPLINE_PAD, d, +1.0, out[1])
+    return out
 
 
 def _gather(padded, pad, starts_zyx, w_zyx):
@@ -254,49 +388,58 @@ def _gather(padded, pad, starts_zyx, w_zyx):
     return view[s[:, 0], s[:, 1], s[:, 2]]
 
 
-def _correlate(a, b, normalised, width):
-    """Displacement (n, 3) (x, y, z) in voxels, peak, snr, valid for window stacks (n, wz, wy, wx)."""
+def _centred_windows(padded, pad, starts_zyx, w_zyx):
+    """Mean-subtracted float32 windows (n, wz, wy, wx) and their float64 energies, in one
+    compiled pass over the padded volume (no float64 copy of the stack)."""
+    s = np.ascontiguousarray(starts_zyx + pad, dtype=np.int64)
+    out = np.empty((len(s),) + tuple(w_zyx), np.float32)
+    energy = np.empty(len(s))
+    _warp_kernels()["windows"](padded, s, *(int(w) for w in w_zyx), out, energy)
+    return out, energy
+
+
+def _correlate(a, b, normalised, width, ea=None, eb=None):
+    """Displacement (n, 3) (x, y, z) in voxels, peak, snr, valid for window stacks (n, wz, wy, wx).
+
+    ``ea``/``eb`` given: the windows are already mean-subtracted float32 with these
+    energies (:func:`_centred_windows`)."""
     from scipy import fft
 
     n = a.shape[0]
     wz, wy, wx = a.shape[1:]
     # single precision FFTs (twice as fast); means and energies accumulate in float64
-    a = (a - a.mean(axis=(1, 2, 3), keepdims=True, dtype=np.float64)).astype(np.float32)
-    b = (b - b.mean(axis=(1, 2, 3), keepdims=True, dtype=np.float64)).astype(np.float32)
-    ea = np.sum(np.square(a, dtype=np.float64), axis=(1, 2, 3))
-    eb = np.sum(np.square(b, dtype=np.float64), axis=(1, 2, 3))
+    if ea is None:
+        a = (a - a.mean(axis=(1, 2, 3), keepdims=True, dtype=np.float64)).astype(np.float32)
+        ea = np.sum(np.square(a, dtype=np.float64), axis=(1, 2, 3))
+    if eb is None:
+        b = (b - b.mean(axis=(1, 2, 3), keepdims=True, dtype=np.float64)).astype(np.float32)
+        eb = np.sum(np.square(b, dtype=np.float64), axis=(1, 2, 3))
     scale_ref = max(float(np.max(ea)) if n else 0.0, float(np.max(eb)) if n else 0.0, 1e-300)
     valid = (ea > 1e-12 * scale_ref) & (eb > 1e-12 * scale_ref) & (ea > 0) & (eb > 0)
     fa = fft.rfftn(a, axes=(1, 2, 3), workers=-1)
     fb = fft.rfftn(b, axes=(1, 2, 3), workers=-1)
-    corr = fft.irfftn(np.conj(fa) * fb, s=(wz, wy, wx), axes=(1, 2, 3), workers=-1)
-    del fa, fb
+    np.conj(fa, out=fa)
+    fa *= fb
+    del fb
+    corr = fft.irfftn(fa, s=(wz, wy, wx), axes=(1, 2, 3), workers=-1)
+    del fa
     if normalised:
         corr /= np.sqrt(np.where(valid, ea * eb, 1.0))[:, None, None, None]
-    flat = corr.reshape(n, -1)
-    arg = np.argmax(flat, axis=1)
-    pk, pj, pi = np.unravel_index(arg, (wz, wy, wx))
-    r = np.arange(n)
-    c = flat[r, arg].astype(np.float64)
+    idx = np.empty((n, 3), np.int64)
+    nbr = np.empty((n, 7), corr.dtype)
+    second = np.empty(n, corr.dtype)
+    _warp_kernels()["peaks"](np.ascontiguousarray(corr), int(width), idx, nbr, second)
+    del corr
+    c = nbr[:, 0].astype(np.float64)
     offs = []
-    for ax, (p, m) in enumerate(((pi, wx), (pj, wy), (pk, wz))):
-        lo, hi = (p - 1) % m, (p + 1) % m
-        idx_lo = [pk, pj, pi]
-        idx_hi = [pk, pj, pi]
-        idx_lo[2 - ax] = lo
-        idx_hi[2 - ax] = hi
-        l = corr[r, idx_lo[0], idx_lo[1], idx_lo[2]]
-        h = corr[r, idx_hi[0], idx_hi[1], idx_hi[2]]
+    for col, m in ((2, wx), (1, wy), (0, wz)):
+        p = idx[:, col]
+        lo, hi = nbr[:, 1 + 2 * (2 - col)], nbr[:, 2 + 2 * (2 - col)]
         integer = np.where(p < (m + 1) // 2, p, p - m)  # circular: the upper half is negative
-        offs.append(integer + _gauss3(l, c, h))
+        offs.append(integer + _gauss3(lo, c, hi))
     disp = np.column_stack(offs)
     # peak ratio: highest value outside a (2 width + 1)^3 box around the primary peak
-    o = np.arange(-width, width + 1)
-    bk = (pk[:, None, None, None] + o[None, :, None, None]) % wz
-    bj = (pj[:, None, None, None] + o[None, None, :, None]) % wy
-    bi = (pi[:, None, None, None] + o[None, None, None, :]) % wx
-    corr[r[:, None, None, None], bk, bj, bi] = -np.inf
-    second = corr.reshape(n, -1).max(axis=1).astype(np.float64)
+    second = second.astype(np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
         snr = np.where(second > 0, c / np.where(second > 0, second, 1.0), np.inf)
     snr = np.where(valid, np.minimum(snr, 1e6), 0.0)
@@ -487,6 +630,7 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
             raise ConfigError(f"piv3d: window {w} (x, y, z) does not fit the volume of {nx}x{ny}x{nz} voxels; "
                               f"use windows no larger than the volume.")
     prev = None  # (centres (cz, cy, cx), displacement (nz', ny', nx', 3) x, y, z)
+    coefs = None  # cubic B-spline coefficients of both volumes, shared by the deformation passes
     t0 = time.perf_counter()
     timings = []
     fld = None
@@ -503,7 +647,9 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
         if deform and prev is not None:
             kk, jj, ii = (np.arange(n, dtype=np.float64) for n in (nz, ny, nx))
             dense = _resample(prev[1], prev[0], (kk, jj, ii)).astype(np.float32)
-            va, vb = _deform_pair(a, b, dense, interpolation)
+            if interpolation == "cubic" and coefs is None:
+                coefs = (_spline_coefficients(a), _spline_coefficients(b))
+            va, vb = _deform_pair(a, b, dense, interpolation, coefs)
             del dense
             shift_a = shift_b = np.zeros_like(starts)
             base = pred_flat
@@ -531,13 +677,14 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
             1, int(chunk_mb * 2**20 / (8 * 8 * math.prod(np.add(w, 2 * m_zyx[::-1])))))
         for c0 in range(0, n, per):
             sl = slice(c0, min(n, c0 + per))
-            wa = _gather(pa, pad, starts[sl] + shift_a[sl], w_zyx)
             if correlation == "ncc":
+                wa = _gather(pa, pad, starts[sl] + shift_a[sl], w_zyx)
                 wb = _gather(pb, pad, starts[sl] + shift_b[sl] - m_zyx, tuple(np.add(w_zyx, 2 * m_zyx)))
                 d, pk, sn, ok = _correlate_ncc(wa, wb, tuple(m_zyx), int(width))
             else:
-                wb = _gather(pb, pad, starts[sl] + shift_b[sl], w_zyx)
-                d, pk, sn, ok = _correlate(wa, wb, normalised, int(width))
+                wa, ea = _centred_windows(pa, pad, starts[sl] + shift_a[sl], w_zyx)
+                wb, eb = _centred_windows(pb, pad, starts[sl] + shift_b[sl], w_zyx)
+                d, pk, sn, ok = _correlate(wa, wb, normalised, int(width), ea, eb)
             disp[sl] = base[sl] + d
             peak[sl], snr[sl], valid[sl] = pk, sn, ok
         del pa, pb

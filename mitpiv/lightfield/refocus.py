@@ -30,7 +30,7 @@ from mitpiv.errors import ConfigError
 from mitpiv.io.arrays import stack_output
 from mitpiv.lightfield.decode import LightField
 from mitpiv.lightfield.geometry import alpha_from_z, z_from_alpha
-from mitpiv.progress import Progress, track
+from mitpiv.progress import Progress, bar, track
 
 __all__ = ["refocus", "focal_stack", "refocus_volume", "grid_steps", "METHODS"]
 
@@ -140,7 +140,72 @@ def _kernels():
                     wacc += wt
             out[k] = result(acc, wacc, dark, wmin, mult)
 
-    _KERNELS.update(plane=plane, points=points)
+    @nb.njit(cache=True)
+    def axis_table(base, shifts, n, nearest, lo, frac, hi):
+        """Interpolation table of one axis for a set of planes: for plane p, view a and
+        output index i, the lower node, fraction and upper node of the sample at
+        ``base[i] + shifts[p, a]`` (lo = -1 where it falls outside), exactly as
+        :func:`plane` computes them per sample."""
+        for p in range(shifts.shape[0]):
+            for a in range(shifts.shape[1]):
+                for i in range(base.shape[0]):
+                    x = on_grid(base[i] + shifts[p, a], n)
+                    if math.isnan(x):
+                        lo[p, a, i] = -1
+                        continue
+                    if nearest:
+                        x = math.floor(x + 0.5)
+                    x0, fx, x1 = cell(x, n)
+                    lo[p, a, i] = x0
+                    frac[p, a, i] = fx
+                    hi[p, a, i] = x1
+
+    @nb.njit(parallel=True, fastmath=False, cache=True)
+    def planes(views, w, ty0, tfy, ty1, tx0, tfx, tx1, mult, wmin, out):
+        """Several planes of :func:`plane` at once, parallel over (plane, output row), from
+        the precomputed per-plane interpolation tables of :func:`axis_table` (same
+        arithmetic per sample, so the same result)."""
+        nv, nu, nt, ns = views.shape
+        npl = out.shape[0]
+        for pt in nb.prange(npl * nt):
+            p = pt // nt
+            ti = pt - p * nt
+            acc = np.zeros(ns)
+            wacc = np.zeros(ns)
+            dark = np.zeros(ns, np.bool_)
+            for iv in range(nv):
+                y0 = ty0[p, iv, ti]
+                if y0 < 0:
+                    continue
+                fy = tfy[p, iv, ti]
+                y1 = ty1[p, iv, ti]
+                for iu in range(nu):
+                    wt = w[iv, iu]
+                    if wt <= 0.0:
+                        continue
+                    r0 = views[iv, iu, y0]
+                    r1 = views[iv, iu, y1]
+                    x0s = tx0[p, iu]
+                    fxs = tfx[p, iu]
+                    x1s = tx1[p, iu]
+                    for si in range(ns):
+                        x0 = x0s[si]
+                        if x0 < 0:
+                            continue
+                        fx = fxs[si]
+                        x1 = x1s[si]
+                        val = (1.0 - fy) * ((1.0 - fx) * r0[x0] + fx * r0[x1]) + fy * ((1.0 - fx) * r1[x0] + fx * r1[x1])
+                        if not mult:
+                            acc[si] += wt * val
+                        elif val > 0.0:
+                            acc[si] += wt * math.log(val)
+                        else:
+                            dark[si] = True
+                        wacc[si] += wt
+            for si in range(ns):
+                out[p, ti, si] = result(acc[si], wacc[si], dark[si], wmin, mult)
+
+    _KERNELS.update(plane=plane, points=points, axis_table=axis_table, planes=planes)
     return _KERNELS
 
 
@@ -265,15 +330,35 @@ def focal_stack(lf: LightField, z_mm, *, method: str = "additive", magnification
     alphas = alpha_from_z(z, focal_length_mm=o.focal_length_mm, magnification=o.magnification)
     w = _weights(lf, weights)
     shape = (len(z), len(lf.t_px), len(lf.s_px))
-    kern = _kernels()["plane"]
+    k = _kernels()
+    nearest = interpolation == "nearest"
+    wmin = _wmin(w, min_view_fraction)
+    nv, nu, nt, ns = lf.data.shape
     t0 = time.perf_counter()
-    with stack_output(shape, out, "focal_stack") as stack:
-        planes = track(enumerate(zip(z, alphas, strict=True)), total=len(z), desc="focal stack: planes",
-                       progress=progress, unit="plane")
-        for k, (zk, ak) in planes:
-            base_s, base_t, sh_u, sh_v = _plane_geometry(lf, float(ak), magnification, float(zk))
-            kern(lf.data, w, base_s, base_t, sh_u, sh_v, method == "multiplicative", interpolation == "nearest",
-                 _wmin(w, min_view_fraction), stack[k])
+    with stack_output(shape, out, "focal_stack") as stack, \
+            bar(len(z), desc="focal stack: planes", progress=progress, unit="plane") as pbar:
+        # planes in blocks: the geometry and the interpolation tables of a block are
+        # computed once, then one compiled call fills the block in parallel over
+        # (plane, row)
+        block = max(1, min(len(z), 16))
+        for b0 in range(0, len(z), block):
+            geo = [_plane_geometry(lf, float(ak), magnification, float(zk))
+                   for zk, ak in zip(z[b0:b0 + block], alphas[b0:b0 + block], strict=True)]
+            npl = len(geo)
+            tabs = []
+            for ax, n_out, n_grid, shifts in ((0, nt, nt, [g[3] for g in geo]), (1, ns, ns, [g[2] for g in geo])):
+                lo = np.empty((npl, len(shifts[0]), n_out), np.int64)
+                fr = np.zeros((npl, len(shifts[0]), n_out))
+                hi = np.zeros((npl, len(shifts[0]), n_out), np.int64)
+                for p, g in enumerate(geo):  # the base positions can differ per plane (constant magnification)
+                    k["axis_table"](np.ascontiguousarray(g[1 - ax]), np.ascontiguousarray(shifts[p])[None], n_grid,
+                                    nearest, lo[p:p + 1], fr[p:p + 1], hi[p:p + 1])
+                tabs.append((lo, fr, hi))
+            res = stack[b0:b0 + npl] if out is None else np.empty((npl, nt, ns), np.float32)
+            k["planes"](lf.data, w, *tabs[0], *tabs[1], method == "multiplicative", wmin, res)
+            if out is not None:
+                stack[b0:b0 + npl] = res
+            pbar.update(npl)
         el = time.perf_counter() - t0
         log.debug("focal stack: %d planes in %.1f s, %.1f ms/plane", len(z), el, el / len(z) * 1e3)
         result = stack if out is None else None

@@ -34,6 +34,7 @@ __all__ = [
 ]
 from mitpiv.reconstruct.plenoptic import drt_mart, drt_weights, fuse, plenoptic_volume  # noqa: E402
 from mitpiv.reconstruct.tomo import (  # noqa: E402
+    WeightCache,
     mart,
     mlos,
     preprocess_images,
@@ -42,5 +43,5 @@ from mitpiv.reconstruct.tomo import (  # noqa: E402
     voxel_weights,
 )
 
-__all__ += ["VoxelGrid", "mlos", "mart", "reconstruct_volume", "sapiv_refocus", "preprocess_images", "voxel_weights", "plenoptic_volume",
+__all__ += ["VoxelGrid", "mlos", "mart", "WeightCache", "reconstruct_volume", "sapiv_refocus", "preprocess_images", "voxel_weights", "plenoptic_volume",
             "fuse", "drt_weights", "drt_mart"]

@@ -1,6 +1,13 @@
 """Numba kernels of the algebraic reconstructions: voxel-pixel weights, sparse (CSR)
 weight assembly, MART and SMART updates.
 
+Pinhole fast path: for :class:`~mitpiv.reconstruct.mapping.PinholeMapping` cameras the
+projection (pinhole + Brown-Conrady), its Jacobian and the voxel footprints are evaluated
+per voxel inside compiled kernels (:func:`camera_row` packs a camera into 20 numbers), so
+the MLOS pass and the weight footprints need no NumPy temporaries; they replicate
+``PinholeCamera.project``/``jacobian`` and ``tomo._footprints`` operation for operation
+(tests compare them). Any other mapping takes the generic NumPy path.
+
 Storage: one CSR matrix per camera, rows = pixels (row-major ``v * W + u``), columns =
 active voxels, float32 weights. A voxel's weights reach at most ``span`` consecutive image
 rows, so image rows ``span`` apart share no voxel: rows of one residue class modulo
@@ -12,12 +19,24 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from mitpiv._numba import numba
 
 _K = {}
 
 CIRCLE, GAUSSIAN = 0, 1
 PIXEL_RADIUS = 1.0 / math.sqrt(math.pi)  # equal-area circle of a unit pixel (0.564 px)
+
+
+CAMERA_FIELDS = 20  # R (9), position (3), focal [px], cx, cy, k1, k2, k3, p1, p2
+
+
+def camera_row(camera) -> np.ndarray:
+    """The 20 numbers of a PinholeCamera the compiled projection uses (float64)."""
+    d = camera.distortion
+    return np.concatenate([np.asarray(camera.rotation, np.float64).ravel(), np.asarray(camera.position_mm, np.float64),
+                           [camera.focal_px, *camera.principal_point_px, d.k1, d.k2, d.k3, d.p1, d.p2]]).astype(np.float64)
 
 
 def kernels() -> dict:
@@ -96,6 +115,31 @@ def kernels() -> dict:
                         else:
                             counts[1 + p] += 1
 
+    @nb.njit(parallel=True, cache=True)
+    def row_pass_sorted(u, v, rad, p0, p1, p2, p3, model, h, w, order, bucket, reach, counts, cursor, indices, data,
+                        fill):
+        """:func:`row_pass` on footprints already sorted by bucket (``u[q]`` is voxel
+        ``order[q]``): the inner loop reads them sequentially instead of gathering."""
+        for row in nb.prange(h):
+            for rb in range(max(row - reach, 0), min(row + reach + 1, h)):
+                for q in range(bucket[rb], bucket[rb + 1]):
+                    r = rad[q]
+                    dy = row + 0.5 - v[q]
+                    if abs(dy) >= r:
+                        continue
+                    uq = u[q]
+                    for col in range(max(int(math.floor(uq - r)), 0), min(int(math.floor(uq + r)) + 1, w)):
+                        dx = col + 0.5 - uq
+                        if not inside_support(model, dx, dy, r, p0[q], p1[q], p2[q]):
+                            continue
+                        p = row * w + col
+                        if fill:
+                            indices[cursor[p]] = order[q]
+                            data[cursor[p]] = weight(model, dx, dy, p0[q], p1[q], p2[q], p3[q])
+                            cursor[p] += 1
+                        else:
+                            counts[1 + p] += 1
+
     @nb.njit(inline="always", cache=True)
     def mart_row(p, indptr, indices, data, img, vol, mu):
         s, e = indptr[p], indptr[p + 1]
@@ -126,6 +170,41 @@ def kernels() -> dict:
                 row = colour + rr * span
                 for col in range(w):
                     mart_row(row * w + col, indptr, indices, data, img, vol, mu)
+
+    @nb.njit(inline="always", cache=True)
+    def mart_row_f32(p, indptr, indices, data, img, vol, mu):
+        """:func:`mart_row` with the multiplicative factor ``exp(lr w)`` evaluated in single
+        precision (the weights are float32 and the volume is returned as float32; measured
+        difference to the float64 factor after 2 iterations: 4e-6 relative; about 20 % less
+        CPU time per weight entry)."""
+        s, e = indptr[p], indptr[p + 1]
+        if s == e:
+            return
+        if img[p] <= 0.0:
+            for k in range(s, e):
+                vol[indices[k]] = 0.0
+            return
+        proj = 0.0
+        for k in range(s, e):
+            proj += data[k] * vol[indices[k]]
+        if proj <= 0.0:
+            return
+        lr = np.float32(mu * math.log(img[p] / proj))
+        if lr == 0.0:
+            return
+        for k in range(s, e):
+            vol[indices[k]] *= math.exp(lr * data[k])
+
+    @nb.njit(parallel=True, cache=True)
+    def mart_camera_f32(indptr, indices, data, img, w, span, vol, mu):
+        """:func:`mart_camera` with :func:`mart_row_f32`."""
+        h = img.shape[0] // w
+        for colour in range(span):
+            n = (h - colour + span - 1) // span
+            for rr in nb.prange(n):
+                row = colour + rr * span
+                for col in range(w):
+                    mart_row_f32(row * w + col, indptr, indices, data, img, vol, mu)
 
     @nb.njit(cache=True)
     def mart_sequential(indptr, indices, data, img, vol, mu):
@@ -174,6 +253,133 @@ def kernels() -> dict:
         for j in nb.prange(vol.shape[0]):
             if wsum[j] > 0.0:
                 vol[j] = vol[j] * math.exp(mu * acc[j] / wsum[j]) if acc[j] > -math.inf else 0.0
+
+    # ------------------------------------------------------------ pinhole fast path
+    @nb.njit(inline="always", cache=True)
+    def pinhole(cam, x, y, z):
+        """Camera-frame point, normalised coordinates and pixel of a world point:
+        (zc, xn, yn, u, v, radial, d_radial); u = v = -1e9 behind the pinhole."""
+        px = x - cam[9]
+        py = y - cam[10]
+        pz = z - cam[11]
+        xc = cam[0] * px + cam[1] * py + cam[2] * pz
+        yc = cam[3] * px + cam[4] * py + cam[5] * pz
+        zc = cam[6] * px + cam[7] * py + cam[8] * pz
+        xn = xc / zc
+        yn = yc / zc
+        r2 = xn * xn + yn * yn
+        k1, k2, k3, p1, p2 = cam[15], cam[16], cam[17], cam[18], cam[19]
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        d_radial = k1 + r2 * (2.0 * k2 + r2 * (3.0 * k3))
+        xy2 = 2.0 * xn * yn
+        xd = xn * radial + p1 * xy2 + p2 * (r2 + 2.0 * xn * xn)
+        yd = yn * radial + p1 * (r2 + 2.0 * yn * yn) + p2 * xy2
+        if zc > 0.0:
+            u = cam[12] * xd + cam[13]
+            v = cam[12] * yd + cam[14]
+        else:
+            u = -1e9
+            v = -1e9
+        return zc, xn, yn, u, v, radial, d_radial
+
+    @nb.njit(inline="always", cache=True)
+    def sample_linear(img, off, h, w, u, v):
+        """Bilinear sample at pixel position (u, v) (centres at i + 0.5), as
+        scipy.ndimage.map_coordinates(order=1, mode="constant"): 0 unless 0 <= v - 0.5 <= h - 1
+        and 0 <= u - 0.5 <= w - 1."""
+        r = v - 0.5
+        c = u - 0.5
+        if not (r >= 0.0 and r <= h - 1 and c >= 0.0 and c <= w - 1):
+            return 0.0
+        r0 = min(int(math.floor(r)), h - 2) if h > 1 else 0
+        c0 = min(int(math.floor(c)), w - 2) if w > 1 else 0
+        fr = r - r0
+        fc = c - c0
+        r1 = min(r0 + 1, h - 1)
+        c1 = min(c0 + 1, w - 1)
+        return ((1.0 - fr) * ((1.0 - fc) * img[off + r0 * w + c0] + fc * img[off + r0 * w + c1])
+                + fr * ((1.0 - fc) * img[off + r1 * w + c0] + fc * img[off + r1 * w + c1]))
+
+    @nb.njit(parallel=True, cache=True)
+    def mlos_pinhole(xs, ys, z, cams, img, offs, hs, ws, exponent, prune, val, keep):
+        """MLOS value of every voxel of the plane at depth ``z`` (flat (y, x) order) and
+        whether it is a candidate: ``val = exp(exponent sum_c log I_c(P_c(x)))`` (0 when a
+        camera does not see the voxel or samples 0); ``keep`` = val > 0 (``prune``) or seen
+        by every camera. ``img``: the images raveled one after another from ``offs``."""
+        ny, nx = ys.shape[0], xs.shape[0]
+        nc = cams.shape[0]
+        for j in nb.prange(ny):
+            for i in range(nx):
+                lg = 0.0
+                seen = True
+                for c in range(nc):
+                    _, _, _, u, v, _, _ = pinhole(cams[c], xs[i], ys[j], z)
+                    h = hs[c]
+                    w = ws[c]
+                    if u >= 0.0 and u <= w and v >= 0.0 and v <= h:
+                        s = sample_linear(img, offs[c], h, w, u, v)
+                        lg += math.log(s) if s > 0.0 else -math.inf
+                    else:
+                        seen = False
+                        lg += -math.inf
+                e = math.exp(exponent * lg)
+                val[j * nx + i] = e
+                keep[j * nx + i] = (e > 0.0) if prune else seen
+
+    @nb.njit(parallel=True, cache=True)
+    def footprints_pinhole(idx, xs, ys, zs, cam, d0, d1, d2, model, psf2, u, v, rad, p0, p1, p2, p3):
+        """Projection (rounded to float32, as stored) and weight-model footprint (support
+        radius and the four model parameters, see ``tomo._footprints``) of voxels ``idx``."""
+        nyx = ys.shape[0] * xs.shape[0]
+        nx = xs.shape[0]
+        f = cam[12]
+        pp1, pp2 = cam[18], cam[19]
+        for q in nb.prange(idx.shape[0]):
+            flat = idx[q]
+            k = flat // nyx
+            rest = flat - k * nyx
+            j = rest // nx
+            i = rest - j * nx
+            zc, xn, yn, uu, vv, radial, d_radial = pinhole(cam, xs[i], ys[j], zs[k])
+            u[q] = uu
+            v[q] = vv
+            # Jacobian d(u, v)/d(x, y, z) = f D dn R (tomo._footprints uses PinholeCamera.jacobian)
+            a = radial + 2.0 * xn * xn * d_radial + 6.0 * pp2 * xn + 2.0 * pp1 * yn
+            e = radial + 2.0 * yn * yn * d_radial + 6.0 * pp1 * yn + 2.0 * pp2 * xn
+            b = 2.0 * xn * yn * d_radial + 2.0 * pp1 * xn + 2.0 * pp2 * yn
+            iz = 1.0 / zc
+            # dd @ dn: rows (f a, f b) and (f b, f e) times [[1/z, 0, -x/z], [0, 1/z, -y/z]]
+            m00 = f * a * iz
+            m01 = f * b * iz
+            m02 = -(f * a * xn + f * b * yn) * iz
+            m10 = f * b * iz
+            m11 = f * e * iz
+            m12 = -(f * b * xn + f * e * yn) * iz
+            j00 = (m00 * cam[0] + m01 * cam[3] + m02 * cam[6]) * d0
+            j01 = (m00 * cam[1] + m01 * cam[4] + m02 * cam[7]) * d1
+            j02 = (m00 * cam[2] + m01 * cam[5] + m02 * cam[8]) * d2
+            j10 = (m10 * cam[0] + m11 * cam[3] + m12 * cam[6]) * d0
+            j11 = (m10 * cam[1] + m11 * cam[4] + m12 * cam[7]) * d1
+            j12 = (m10 * cam[2] + m11 * cam[5] + m12 * cam[8]) * d2
+            area = (abs(j00 * j11 - j01 * j10) + abs(j01 * j12 - j02 * j11) + abs(j00 * j12 - j02 * j10))
+            if model == 0:
+                rv = math.sqrt(area / math.pi)
+                rad[q] = rv + PIXEL_RADIUS
+                p0[q] = rv
+                p1[q] = 0.0
+                p2[q] = 0.0
+                p3[q] = 0.0
+            else:
+                cxx = (j00 * j00 + j01 * j01 + j02 * j02) / 12.0 + psf2
+                cxy = (j00 * j10 + j01 * j11 + j02 * j12) / 12.0
+                cyy = (j10 * j10 + j11 * j11 + j12 * j12) / 12.0 + psf2
+                det = cxx * cyy - cxy * cxy
+                lam = 0.5 * (cxx + cyy) + math.sqrt(0.25 * (cxx - cyy) ** 2 + cxy * cxy)
+                rad[q] = 3.0 * math.sqrt(lam) + 0.75
+                p0[q] = cyy / det
+                p1[q] = -cxy / det
+                p2[q] = cxx / det
+                p3[q] = area / (2.0 * math.pi * math.sqrt(det))
 
     _K.update(locals())
     return _K

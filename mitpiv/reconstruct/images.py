@@ -19,7 +19,7 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
                        mu: float = 1.0, weights: str = "circle", interpolation: str = "linear",
                        preprocess: float | None = None, combine: str = "multiplicative", threshold_k: float | None = 3.0,
                        rays_per_pixel: int = 16, fuse_normalise: str = "histogram",
-                       progress: Progress = None) -> tuple[np.ndarray, dict]:
+                       progress: Progress = None, cache=None) -> tuple[np.ndarray, dict]:
     """Reconstruct a volume from the images of one frame and their EXR metadata.
 
     method : one of :data:`RECONSTRUCT_METHODS`. "plenoptic": each raw image decoded (its
@@ -29,6 +29,8 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
         image, dense-ray-tracing MART. Other methods: :func:`reconstruct_volume`.
     progress : None, bool or callable
         Passed to the method (planes, iterations); see :mod:`mitpiv.progress`.
+    cache : :class:`~mitpiv.reconstruct.tomo.WeightCache`, optional
+        MART/SMART weights shared by the frames of one experiment (same cameras and grid).
 
     Returns (volume, info).
     """
@@ -43,7 +45,7 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
             maps.append(mapping_from_metadata(m))
         return reconstruct_volume(images, maps, grid, method, iterations=iterations, mu=mu, weights=weights,
                                   interpolation=interpolation, preprocess=preprocess, combine=combine,
-                                  threshold_k=threshold_k, progress=progress)
+                                  threshold_k=threshold_k, progress=progress, cache=cache)
     if method not in RECONSTRUCT_METHODS:
         raise ConfigError(f"reconstruct: method={method!r} is not one of {RECONSTRUCT_METHODS}.")
     from mitpiv.lightfield import decode

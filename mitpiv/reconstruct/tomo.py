@@ -21,7 +21,14 @@ pixel area), and ``"gaussian"``, the voxel's projected box covariance ``J diag(d
 J^T`` widened by an isotropic PSF of ``psf_sigma_px`` (weight = projected area x Gaussian
 density at the pixel centre, truncated at 3 sigma). Weights are never stored as a dense
 matrix: they are computed once per camera for the voxels that survive pruning and kept
-as a CSR matrix (pixels x active voxels, float32).
+as a CSR matrix (pixels x active voxels, float32); a :class:`WeightCache` keeps them for the
+next frame of the same cameras and grid (the experiment runner shares one across frames).
+
+Speed (issue 26): for pinhole mappings the MLOS pass, the projections and the weight
+footprints run in compiled kernels (``_kernels.py``; hand-written because they fuse the
+camera model with the sampling and no library offers that), the CSR assembly reads
+bucket-sorted footprints, and the MART sweep evaluates its factor in single precision.
+The pre-issue code path is kept as the benchmark baseline in bench/reference_mart.py.
 """
 
 from __future__ import annotations
@@ -38,10 +45,10 @@ from mitpiv.errors import ConfigError, MitpivWarning
 from mitpiv.grid import VoxelGrid
 from mitpiv.physics.camera import PinholeCamera
 from mitpiv.progress import Progress, track
-from mitpiv.reconstruct._kernels import CIRCLE, GAUSSIAN, PIXEL_RADIUS, kernels
+from mitpiv.reconstruct._kernels import CIRCLE, GAUSSIAN, PIXEL_RADIUS, camera_row, kernels
 from mitpiv.reconstruct.mapping import CameraMapping, PinholeMapping, mapping_from_metadata
 
-__all__ = ["mlos", "mart", "sapiv_refocus", "preprocess_images", "voxel_weights", "INTERPOLATIONS", "WEIGHT_MODELS"]
+__all__ = ["mlos", "mart", "WeightCache", "sapiv_refocus", "preprocess_images", "voxel_weights", "INTERPOLATIONS", "WEIGHT_MODELS"]
 
 log = logging.getLogger(__name__)
 
@@ -347,23 +354,26 @@ def _build_weights(uv, fp, model, shape_hw):
     """CSR (pixel rows) of one camera, assembled in parallel over image rows."""
     k = kernels()
     h, w = shape_hw
-    u, v = (np.ascontiguousarray(uv[:, i], dtype=np.float64) for i in (0, 1))
-    rad = np.ascontiguousarray(fp[0], dtype=np.float64)
-    pars = tuple(np.ascontiguousarray(a, dtype=np.float64) for a in fp[1:])
-    # voxels bucketed by the image row of their projected centre (clamped onto the image)
-    crow = np.clip(np.floor(v), 0, h - 1).astype(np.int64)
+    v_all = np.asarray(uv[:, 1], dtype=np.float64)
+    # voxels bucketed by the image row of their projected centre (clamped onto the image);
+    # the footprints are sorted by bucket so the row kernel reads them sequentially
+    crow = np.clip(np.floor(v_all), 0, h - 1).astype(np.int64)
     order = np.argsort(crow, kind="stable")
     bucket = np.zeros(h + 1, np.int64)
     np.cumsum(np.bincount(crow, minlength=h), out=bucket[1:])
+    del crow
+    u, v = (np.ascontiguousarray(uv[order, i], dtype=np.float64) for i in (0, 1))
+    rad = np.ascontiguousarray(fp[0][order], dtype=np.float64)
+    pars = tuple(np.ascontiguousarray(a[order], dtype=np.float64) for a in fp[1:])
     reach = int(np.ceil(rad.max())) + 1 if len(rad) else 0
     span = int((np.floor(v + rad) - np.floor(v - rad)).max()) + 1 if len(rad) else 1
     counts = np.zeros(h * w + 1, np.int64)
     args = (u, v, rad, *pars, CIRCLE if model == "circle" else GAUSSIAN, h, w, order, bucket, reach)
-    k["row_pass"](*args, counts, counts, np.zeros(0, np.int32), np.zeros(0, np.float32), False)
+    k["row_pass_sorted"](*args, counts, counts, np.zeros(0, np.int32), np.zeros(0, np.float32), False)
     indptr = np.cumsum(counts)
     indices = np.empty(indptr[-1], np.int32)
     data = np.empty(indptr[-1], np.float32)
-    k["row_pass"](*args, counts, indptr[:-1].copy(), indices, data, True)
+    k["row_pass_sorted"](*args, counts, indptr[:-1].copy(), indices, data, True)
     wsum = np.bincount(indices, weights=data, minlength=len(u))
     return _CameraWeights(indptr, indices, data, w, max(span, 1), wsum)
 
@@ -411,6 +421,14 @@ def voxel_weights(mapping, grid: VoxelGrid, voxels, *, weights: str = "circle", 
 
 
 # ---------------------------------------------------------------------- MART / SMART
+def _pinhole_rows(maps):
+    """(n_cameras, 20) packed cameras when every mapping is a PinholeMapping (the compiled
+    fast path), else None (the generic NumPy path)."""
+    if all(type(m) is PinholeMapping for m in maps):
+        return np.stack([camera_row(m.camera) for m in maps])
+    return None
+
+
 def _candidates(imgs, maps, grid, interpolation, prune, progress, what):
     """Flat indices of voxels worth reconstructing, their MLOS values and projections."""
     samplers = [_sampler(im, interpolation) for im in imgs]
@@ -430,10 +448,82 @@ def _candidates(imgs, maps, grid, interpolation, prune, progress, what):
     return np.concatenate(idx), np.concatenate(init), [np.concatenate(u) for u in uvs]
 
 
+def _candidates_pinhole(imgs, rows, grid, prune, progress, what):
+    """:func:`_candidates` (linear interpolation) in one compiled pass per plane: flat
+    indices and MLOS values of the candidate voxels (their projections are recomputed with
+    the footprints, cheaper than storing them)."""
+    k = kernels()
+    flat = np.concatenate([im.ravel() for im in imgs])
+    offs = np.concatenate([[0], np.cumsum([im.size for im in imgs])[:-1]]).astype(np.int64)
+    hs = np.array([im.shape[0] for im in imgs], np.int64)
+    ws = np.array([im.shape[1] for im in imgs], np.int64)
+    nyx = grid.shape[1] * grid.shape[2]
+    xs, ys, zs = grid.x_mm, grid.y_mm, grid.z_mm
+    val = np.empty(nyx)
+    keep = np.empty(nyx, np.bool_)
+    idx, init = [], []
+    for kz in track(range(grid.shape[0]), desc=f"{what}: MLOS planes", progress=progress, unit="plane"):
+        k["mlos_pinhole"](xs, ys, float(zs[kz]), rows, flat, offs, hs, ws, 1.0 / len(imgs), bool(prune), val, keep)
+        sel = np.flatnonzero(keep)
+        idx.append(sel + kz * nyx)
+        init.append(val[sel])
+    return np.concatenate(idx), np.concatenate(init)
+
+
+def _footprints_pinhole(row, ids, grid, model, psf):
+    """Projections (float32, as the generic path stores them) and footprints (float32) of
+    voxels ``ids`` for one packed camera: (u, v, [radius, p0, p1, p2, p3])."""
+    out = [np.empty(len(ids), np.float32) for _ in range(7)]
+    kernels()["footprints_pinhole"](np.ascontiguousarray(ids, np.int64), grid.x_mm, grid.y_mm, grid.z_mm, row,
+                                    *(float(d) for d in grid.voxel_mm), CIRCLE if model == "circle" else GAUSSIAN,
+                                    float(psf) ** 2, *out)
+    return out[0], out[1], out[2:]
+
+
+class WeightCache:
+    """Voxel-pixel weights kept between :func:`mart` calls on the same cameras and grid.
+
+    The geometry does not change between the frames of an experiment: when a frame's
+    active voxels (those surviving MLOS and zero-pixel pruning) are the same as the
+    previous frame's, its weights are reused instead of rebuilt. Holds one set of weights
+    (:attr:`nbytes`); drop the object (or :meth:`clear`) to free it.
+    """
+
+    def __init__(self):
+        self.clear()
+
+    def clear(self) -> None:
+        self._key, self._idx, self._cams = None, None, None
+        self.hits = 0
+
+    @property
+    def nbytes(self) -> int:
+        return 0 if self._cams is None else int(sum(c.nbytes for c in self._cams) + self._idx.nbytes)
+
+    def get(self, key, idx):
+        if self._cams is not None and key == self._key and np.array_equal(idx, self._idx):
+            self.hits += 1
+            return self._cams
+        return None
+
+    def put(self, key, idx, cams) -> None:
+        self._key, self._idx, self._cams = key, idx, cams
+
+
+def _cache_key(maps, imgs, grid, model, psf):
+    import json
+
+    return (tuple(json.dumps(m.to_dict(), sort_keys=True, default=str) for m in maps),
+            tuple(im.shape for im in imgs), json.dumps(grid.to_dict(), sort_keys=True), model, float(psf))
+
+
+RESIDUALS = ("each", "final")
+
+
 def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 1.0, smart: bool = False,
          init="mlos", weights: str = "circle", psf_sigma_px: float = 0.5, interpolation: str = "linear",
          prune: bool = True, preprocess: float | None = None, chunk: int = 1_000_000, progress: Progress = None,
-         return_info: bool = False):
+         return_info: bool = False, cache: WeightCache | None = None, residuals: str = "each"):
     """MART or SMART reconstruction on sparse voxel-pixel weights.
 
     MART (``smart=False``; Elsinga et al. 2006): for every pixel ``i`` of every camera in
@@ -445,6 +535,10 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
     reconstructed, and among them those that give weight to a zero pixel in any camera
     are zero from the start (the first MART update would zero them); without ``prune``,
     every voxel that all cameras see. Voxels outside that set are zero in the result.
+
+    Pinhole mappings (:class:`PinholeMapping`, the true or a fitted pinhole + Brown-Conrady
+    model) with linear interpolation take a compiled path for the MLOS pass and the weight
+    footprints; other mappings the generic NumPy one (same result).
 
     Parameters
     ----------
@@ -469,13 +563,21 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
         When given, the images are first thresholded by :func:`preprocess_images` with this
         ``k``.
     chunk : int
-        Voxels per batch when computing weight footprints (bounds temporary memory).
+        Voxels per batch when computing weight footprints on the generic path (bounds
+        temporary memory).
     progress : None, bool or callable
         One step per MLOS plane (desc ``"mart: MLOS planes"``), then one per iteration
         (``"mart: iterations"``); see :mod:`mitpiv.progress`.
     return_info : bool
         Also return a dict: active voxels, weight entries and bytes, the image residual
-        ``||I - W E|| / ||I||`` after each iteration, timings.
+        ``||I - W E|| / ||I||`` (see ``residuals``), timings, whether the weights came from
+        ``cache``.
+    cache : WeightCache, optional
+        Reuse the weights of the previous call when cameras, grid, weight model and active
+        voxels are the same (the frames of one experiment), and keep this call's.
+    residuals : "each" | "final"
+        With ``return_info``: the residual after every iteration, or only after the last
+        (each costs about a quarter of a MART sweep).
 
     Returns
     -------
@@ -485,7 +587,10 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
     imgs, maps = _check_images(images, mappings, grid, what)
     check_iterations(what, iterations, mu)
     _check_choice(what, "interpolation", interpolation, INTERPOLATIONS)
+    _check_choice(what, "residuals", residuals, RESIDUALS)
     psf = _check_weight_options(what, weights, psf_sigma_px)
+    if cache is not None and not isinstance(cache, WeightCache):
+        raise ConfigError(f"{what}: 'cache' must be a WeightCache or None, got {type(cache).__name__}.")
     if isinstance(init, str):
         _check_choice(what, "init", init, ("mlos", "uniform"))
     else:
@@ -497,22 +602,30 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
     _check_coverage(maps, imgs, grid, what)
     _warn_dark(imgs, what)
     t0 = time.perf_counter()
-    idx, e_mlos, uvs = _candidates(imgs, maps, grid, interpolation, prune, progress, what)
+    rows = _pinhole_rows(maps) if interpolation == "linear" else None
+    if rows is not None:
+        idx, e_mlos = _candidates_pinhole(imgs, rows, grid, prune, progress, what)
+        uvs = None
+    else:
+        idx, e_mlos, uvs = _candidates(imgs, maps, grid, interpolation, prune, progress, what)
+    t_mlos = time.perf_counter() - t0
     k = kernels()
     model = weights
     mcode = CIRCLE if model == "circle" else GAUSSIAN
 
-    def footprints(c, sel):
-        """Footprints of camera c for the voxels idx[sel], in chunks (float32 storage)."""
+    def footprints(c, sel, dtype=np.float32):
+        """(u, v, footprints) of camera c for the voxels idx[sel]."""
         ids = idx[sel]
-        out = [np.empty(len(ids), np.float32) for _ in range(5)]
+        if rows is not None:
+            return _footprints_pinhole(rows[c], ids, grid, model, psf)
+        out = [np.empty(len(ids), dtype) for _ in range(5)]
         for s in range(0, len(ids), chunk):
             part = _footprints(maps[c], grid.centres(ids[s : s + chunk]), grid, model, psf)
             for o, p in zip(out, part, strict=True):
                 o[s : s + chunk] = p
-        return out
+        return uvs[c][sel, 0], uvs[c][sel, 1], out
 
-    # Zero-pixel pruning, camera by camera and chunk by chunk (footprints are not kept)
+    # Zero-pixel pruning, camera by camera
     alive = np.ones(len(idx), np.bool_)
     if prune:
         for c in range(len(maps)):
@@ -520,49 +633,65 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
                 continue
             for s in range(0, len(idx), chunk):
                 sl = slice(s, s + chunk)
-                fp = _footprints(maps[c], grid.centres(idx[sl]), grid, model, psf)
+                u, v, fp = footprints(c, sl, np.float64)
                 a = alive[sl].copy()
-                k["survives"](uvs[c][sl, 0].copy(), uvs[c][sl, 1].copy(), *fp, mcode, imgs[c], a)
+                k["survives"](np.ascontiguousarray(u), np.ascontiguousarray(v), *fp, mcode, imgs[c], a)
                 alive[sl] = a
-    idx = idx[alive]
+    n_candidates = len(idx)
+    if not alive.all():
+        idx = idx[alive]
+        if uvs is not None:
+            uvs = [u[alive] for u in uvs]
     if isinstance(init, str):
         vol = e_mlos[alive].astype(np.float64) if init == "mlos" else np.ones(len(idx))
     else:
         vol = init_vol.ravel()[idx].copy()
     del e_mlos
-    cams = []
-    for c in range(len(maps)):
-        uvs[c] = uvs[c][alive]
-        cams.append(_build_weights(uvs[c], footprints(c, slice(None)), model, imgs[c].shape))
-        uvs[c] = None
+    key = _cache_key(maps, imgs, grid, model, psf) if cache is not None else None
+    cams = cache.get(key, idx) if cache is not None else None
+    from_cache = cams is not None
+    if cams is None:
+        cams = []
+        for c in range(len(maps)):
+            u, v, fp = footprints(c, slice(None))
+            if uvs is not None:
+                uvs[c] = None
+            cams.append(_build_weights(np.column_stack([u, v]), fp, model, imgs[c].shape))
+            del u, v, fp
+        if cache is not None:
+            cache.put(key, idx, cams)
     t_setup = time.perf_counter() - t0
     flat = [np.ascontiguousarray(im.ravel()) for im in imgs]
     norm = math.sqrt(sum(float(f @ f) for f in flat)) or 1.0
     wsum = sum(cw.wsum for cw in cams)
-    residuals, t1 = [], time.perf_counter()
+    res, t1 = [], time.perf_counter()
     proj = [np.empty(f.size) for f in flat]
     lr = [np.empty(f.size) for f in flat] if smart else []
     for it in track(range(iterations), desc=f"{what}: iterations", progress=progress):
         if smart:
             smart_sweep(cams, flat, vol, wsum, float(mu), proj, lr)
-            if return_info:
-                residuals.append(_residual(cams, flat, proj, vol, k) / norm)
         else:
             for cw, f in zip(cams, flat, strict=True):
-                k["mart_camera"](cw.indptr, cw.indices, cw.data, f, cw.width, cw.span, vol, float(mu))
-            if return_info:
-                residuals.append(_residual(cams, flat, proj, vol, k) / norm)
+                k["mart_camera_f32"](cw.indptr, cw.indices, cw.data, f, cw.width, cw.span, vol, float(mu))
+        if return_info and (residuals == "each" or it == iterations - 1):
+            res.append(_residual(cams, flat, proj, vol, k) / norm)
         log.debug("%s: iteration %d/%d, %.1f s", what, it + 1, iterations, time.perf_counter() - t1)
-    log.info("%s: %d active voxels of %d candidates, setup %.1f s, %d iterations %.1f s", what, len(idx), len(alive),
-             t_setup, iterations, time.perf_counter() - t1)
+    t_iter = time.perf_counter() - t1
+    log.info("%s: %d active voxels of %d candidates, setup %.1f s (MLOS %.1f s, weights %s), %d iterations %.1f s",
+             what, len(idx), n_candidates, t_setup, t_mlos, "cached" if from_cache else "built", iterations, t_iter)
     out = np.zeros(grid.n_voxels, np.float32)
     out[idx] = vol
     out = out.reshape(grid.shape)
     if not return_info:
         return out
-    info = {"active_voxels": int(len(idx)), "candidate_voxels": int(len(alive)), "weight_entries": int(sum(len(c.data) for c in cams)),
-            "weight_bytes": int(sum(c.nbytes for c in cams)), "residuals": residuals, "setup_s": t_setup,
-            "iterate_s": time.perf_counter() - t1, "row_span": [c.span for c in cams]}
+    wbytes = int(sum(c.nbytes for c in cams))
+    info = {"active_voxels": int(len(idx)), "candidate_voxels": int(n_candidates),
+            "weight_entries": int(sum(len(c.data) for c in cams)), "weight_bytes": wbytes,
+            "memory_bytes": int(wbytes + sum(c.wsum.nbytes for c in cams) + vol.nbytes + idx.nbytes
+                                + sum(p.nbytes for p in proj) + sum(p.nbytes for p in lr)),
+            "residuals": res, "setup_s": t_setup, "mlos_s": t_mlos, "iterate_s": t_iter,
+            "row_span": [c.span for c in cams], "weights_cached": bool(from_cache),
+            "fast_path": rows is not None}
     return out, info
 
 
@@ -592,10 +721,11 @@ TOMO_METHODS = ("mlos", "mart", "smart", "sapiv")
 def reconstruct_volume(images, mappings, grid: VoxelGrid, method: str = "mart", *, iterations: int = 5, mu: float = 1.0,
                        weights: str = "circle", interpolation: str = "linear", preprocess: float | None = None,
                        combine: str = "multiplicative", threshold_k: float | None = 3.0,
-                       progress: Progress = None) -> tuple[np.ndarray, dict]:
+                       progress: Progress = None, cache: WeightCache | None = None) -> tuple[np.ndarray, dict]:
     """One entry point for the camera-image methods (``mlos``, ``mart``, ``smart``,
     ``sapiv``, the latter combining by ``combine`` with per-plane ``threshold_k``); returns
-    (volume, info), info from :func:`mart` or empty."""
+    (volume, info), info from :func:`mart` (the final residual only) or empty. ``cache``: a
+    :class:`WeightCache` shared by the frames of one experiment (MART/SMART)."""
     if method == "mlos":
         return mlos(images, mappings, grid, interpolation=interpolation, progress=progress), {}
     if method == "sapiv":
@@ -603,5 +733,6 @@ def reconstruct_volume(images, mappings, grid: VoxelGrid, method: str = "mart", 
                              threshold_k=threshold_k, progress=progress), {}
     if method in ("mart", "smart"):
         return mart(images, mappings, grid, iterations=iterations, mu=mu, smart=method == "smart", weights=weights,
-                    interpolation=interpolation, preprocess=preprocess, progress=progress, return_info=True)
+                    interpolation=interpolation, preprocess=preprocess, progress=progress, return_info=True,
+                    cache=cache, residuals="final")
     raise ConfigError(f"reconstruct: method={method!r} is not one of {TOMO_METHODS}.")

@@ -459,6 +459,7 @@ def stage_reconstruct(ctx: StageContext) -> dict:
     from mitpiv import costs
     from mitpiv.io import write_volume
     from mitpiv.reconstruct.images import reconstruct_images
+    from mitpiv.reconstruct.tomo import WeightCache
 
     cfg = ctx.cfg
     r = cfg.reconstruction
@@ -468,6 +469,7 @@ def stage_reconstruct(ctx: StageContext) -> dict:
                        what=f"[reconstruction] {r.method} on {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]} voxels, "
                             f"per frame", fix="use larger voxels or smaller bounds")
     info = {}
+    cache = WeightCache()  # the cameras do not move between frames: weights built once
     for frame in FRAMES:
         imgs, metas, _ = images(ctx.run_dir, frame, source_of(cfg))
         if r.camera_model == "undistorted":
@@ -476,7 +478,7 @@ def stage_reconstruct(ctx: StageContext) -> dict:
                                       weights=r.weights, interpolation=r.interpolation, preprocess=r.preprocess,
                                       combine=r.combine, threshold_k=r.threshold_k,
                                       fuse_normalise=r.fuse_normalise, rays_per_pixel=r.rays_per_pixel,
-                                      progress=ctx.progress)
+                                      progress=ctx.progress, cache=cache)
         if inf:
             info[f"frame{frame}"] = {k: v for k, v in inf.items() if isinstance(v, int | float | str)}
         write_volume(ctx.out / f"volume_{frame}.npz", vol, {"method": r.method, "grid": grid.to_dict()})

@@ -1,0 +1,305 @@
+"""Issue 26 benchmark: ours beside a baseline, in the same run, for every row of the
+performance table, and writes docs/benchmarks.md (machine, commit, load average).
+
+Rows (each: our time, the baseline's, the ratio, the accuracy difference):
+
+* MART, 4 cameras, 0.05 ppp, 40 iterations, on a 480x320x130-voxel grid scaled by
+  ``--scale`` per lateral axis (1 = the published size): ours vs the frozen pre-issue code
+  path (bench/reference_mart.py) vs a plain scipy.sparse MART on the same weights (matrix
+  built once; row-action updates in blocks of pixels that share no voxel, which is exact).
+* 3D multi-pass PIV (64-48-32, 75 % overlap, Lamb-Oseen vortex) on a volume of
+  ``--piv-shape`` voxels: ours vs the frozen pre-issue piv3d (bench/reference_piv3d.py);
+  OpenPIV's 3D single pass at 32^3 windows beside them (time and RMS error).
+* Focal stack of a plenoptic raw image (additive): ours vs shift-and-add over the
+  sub-aperture views with scipy.ndimage.shift (bilinear).
+* 1000-plane focal stack of a 6600x4400 raw image: ours and the pre-issue plane kernel on
+  a crop, planes timed on a subset, extrapolated.
+* Scaling: MART (10 iterations) and PIV time at four sizes, fitted exponent; MART memory
+  per voxel.
+
+The machine is shared: absolute times are noisy; the ratios are taken in the same run.
+``python bench/bench_speed.py [--quick]``.
+"""
+
+import argparse
+import datetime
+import math
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from bench_reconstruct import setup  # noqa: E402
+from reference_mart import mart_reference  # noqa: E402
+
+from mitpiv import analysis as an  # noqa: E402
+from mitpiv import reconstruct as rc  # noqa: E402
+
+ROWS = []
+
+
+def timed(f, *a, **k):
+    t = time.perf_counter()
+    c = time.process_time()
+    r = f(*a, **k)
+    return r, time.perf_counter() - t, time.process_time() - c
+
+
+def emit(stage, ours, base_name, base, accuracy, note=""):
+    ratio = base / ours if ours > 0 else float("nan")
+    line = f"| {stage} | {ours:.2f} s | {base_name} | {base:.2f} s | {ratio:.1f}x | {accuracy} | {note} |"
+    print(line, flush=True)
+    ROWS.append(line)
+
+
+# ------------------------------------------------------------------------------ MART
+def mart_case(scale, ppp=0.05, seed=0):
+    half = (24.0 * scale, 16.0 * scale, 6.5)
+    res = (max(32, int(640 * scale)), max(32, int(480 * scale)))
+    cams, pts, imgs = setup(res, half, ppp, seed=seed, dist=1000.0)
+    grid = rc.VoxelGrid.from_bounds(-np.asarray(half), half, 0.1)
+    return cams, pts, imgs, grid
+
+
+def scipy_mart(cams, imgs, grid, iterations, mu=1.0):
+    """Plain scipy.sparse MART on the same weights and voxels as ours: pixels of one image
+    column in image rows ``span`` apart share no voxel, so each such block is one exact
+    simultaneous row-action update: p = A v (scipy.sparse), v_j *= (I_i / p_i)^(mu w_ij)
+    for the one row i of the block that sees voxel j (zero pixels zero their voxels)."""
+    from scipy.sparse import csr_matrix
+
+    cache = rc.WeightCache()
+    v0, info = rc.mart(imgs, cams, grid, iterations=0, cache=cache, return_info=True)
+    idx, cws = cache._idx, cache._cams
+    vol = v0.ravel()[idx].astype(np.float64)
+    t = time.perf_counter()
+    blocks = []
+    for cw, im in zip(cws, imgs, strict=True):
+        h, w = im.shape
+        a = csr_matrix((cw.data, cw.indices, cw.indptr), shape=(h * w, len(idx)))
+        f = im.ravel()
+        for colour in range(cw.span):
+            for col in range(w):
+                rows = np.arange(colour, h, cw.span) * w + col
+                sub = a[rows]
+                if sub.nnz:
+                    rep = np.repeat(np.arange(len(rows)), np.diff(sub.indptr))
+                    blocks.append((sub, rep, f[rows]))
+    t_build = time.perf_counter() - t
+    t = time.perf_counter()
+    for _ in range(iterations):
+        for sub, rep, f in blocks:
+            p = sub @ vol
+            ok = (p > 0) & (f > 0)
+            lr = np.zeros(len(f))
+            lr[ok] = mu * np.log(f[ok] / p[ok])
+            fac = np.exp(lr[rep] * sub.data)
+            fac[(f <= 0)[rep]] = 0.0
+            vol[sub.indices] *= fac
+    t_iter = time.perf_counter() - t
+    out = np.zeros(grid.n_voxels, np.float32)
+    out[idx] = vol
+    return out.reshape(grid.shape), info["setup_s"] + t_build, t_iter
+
+
+def mart_rows(scale, iterations):
+    cams, pts, imgs, grid = mart_case(scale)
+    truth = an.truth_volume(pts, grid)
+    small = mart_case(0.1)
+    rc.mart(small[2], small[0], small[3], iterations=1)  # compile outside the timings
+    mart_reference(small[2], small[0], small[3], iterations=1)
+    label = f"MART {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]}, 4 cameras, {iterations} it"
+    (v1, info), t1, c1 = timed(rc.mart, imgs, cams, grid, iterations=iterations, return_info=True, residuals="final")
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+    (v0, info0), t0, c0 = timed(mart_reference, imgs, cams, grid, iterations=iterations, return_info=True)
+    q1, q0 = an.quality_q(v1, truth), an.quality_q(v0, truth)
+    diff = float(np.max(np.abs(v1.astype(np.float64) - v0)) / max(float(v0.max()), 1e-30))
+    emit(label, t1, "pre-issue code path", t0, f"Q {q1:.4f} vs {q0:.4f}; max |diff| {diff:.1e} of max",
+         f"CPU {c1:.0f} s vs {c0:.0f} s; setup {info['setup_s']:.1f} s vs {info0['setup_s']:.1f} s; "
+         f"{info['active_voxels'] / 1e6:.2f} M active voxels, weights {info['weight_bytes'] / 2**20:.0f} MiB, "
+         f"MART memory {info['memory_bytes'] / 2**20:.0f} MiB = {info['memory_bytes'] / grid.n_voxels:.1f} B per grid "
+         f"voxel ({info['memory_bytes'] / max(info['active_voxels'], 1):.0f} B per active voxel); peak RSS {rss:.2f} GiB")
+    (v2, setup_s, iter_s), t2, c2 = timed(scipy_mart, cams, imgs, grid, iterations)
+    diff2 = float(np.max(np.abs(v1.astype(np.float64) - v2)) / max(float(v2.max()), 1e-30))
+    emit(label, t1, "scipy.sparse MART, same weights", t2, f"Q {q1:.4f} vs {an.quality_q(v2, truth):.4f}; "
+         f"max |diff| {diff2:.1e} of max", f"its iterations {iter_s:.1f} s vs ours {info['iterate_s']:.1f} s")
+
+
+# ------------------------------------------------------------------------------ PIV
+def piv_rows(shape):
+    from bench_analysis import openpiv_row, volumes
+    from reference_piv3d import piv3d as piv3d_reference
+
+    grid, a, b, flow, dt, _ = volumes(shape)
+    kw = dict(windows=(64, 48, 32), overlap=0.75, dt_s=dt)
+    an.piv3d(a[:40, :80, :80], b[:40, :80, :80], rc.VoxelGrid((0, 0, 0), (0.05,) * 3, (40, 80, 80)),
+             windows=(32, 24, 16), overlap=0.5, dt_s=dt)  # compile
+    f1, t1, c1 = timed(an.piv3d, a, b, grid, **kw)
+    f0, t0, c0 = timed(piv3d_reference, a, b, grid, **kw)
+    e1 = an.velocity_error(f1, flow)["rms_vox"]
+    e0 = an.velocity_error(f0, flow)["rms_vox"]
+    d = float(np.max(np.abs(f1.displacement_vox() - f0.displacement_vox())))
+    label = f"3D PIV 64-48-32, {shape[2]}x{shape[1]}x{shape[0]} voxels, {f1.n_vectors} vectors"
+    emit(label, t1, "pre-issue piv3d", t0, f"RMS {', '.join(f'{x:.4f}' for x in e1)} vs "
+         f"{', '.join(f'{x:.4f}' for x in e0)} vox; max |diff| {d:.1e} vox", f"CPU {c1:.0f} s vs {c0:.0f} s")
+    try:
+        t_op, n_op, rms_op = openpiv_row(grid, a, b, flow, dt, window=32, overlap=24)
+        emit(label, t1, f"OpenPIV 3D single pass 32^3 ({n_op} vectors)", t_op,
+             f"RMS |err| ours {math.sqrt(sum(x * x for x in e1)):.4f} vs OpenPIV {rms_op:.4f} vox",
+             f"per vector: ours {1e6 * t1 / f1.n_vectors:.0f} us, OpenPIV {1e6 * t_op / max(n_op, 1):.0f} us")
+    except ImportError as exc:
+        print(f"OpenPIV not available: {exc}")
+
+
+# ------------------------------------------------------------------------------ focal stacks
+def focal_rows(n_px, planes):
+    from bench_lightfield import baseline_plane, synthetic_lf
+    from reference_refocus import focal_stack as focal_stack_reference
+
+    from mitpiv import lightfield as lfm
+    from mitpiv.physics.plenoptic import PlenopticCamera
+
+    cam = PlenopticCamera(resolution=(n_px, n_px), pixel_pitch_um=5.5, focal_length_mm=50, f_number=2.8,
+                          focus_distance_mm=250, mla_pitch_um=5.5 * 14, mla_layout="hex")
+    lf = synthetic_lf(cam)
+    z = np.linspace(-20, 20, planes)
+    lfm.focal_stack(lf, z[:2])
+    focal_stack_reference(lf, z[:2])
+    st, t1, _ = timed(lfm.focal_stack, lf, z)
+    st0, t0, _ = timed(focal_stack_reference, lf, z)
+    alphas = lfm.alpha_from_z(z[:3], focal_length_mm=50, magnification=cam.magnification)
+    base, tb, _ = timed(lambda: [baseline_plane(lf, a) for a in alphas])
+    o = lf.optics
+    shift = np.abs(1 - 1 / alphas).max() * o.image_distance_mm / o.gap_mm * o.image_scale * np.abs(lf.du_px).max()
+    mg = int(np.ceil(shift / (lf.t_px[1] - lf.t_px[0]))) + 2
+    inner = (slice(mg, -mg), slice(mg, -mg))
+    err = max(np.abs(st[k][inner] - base[k][inner]).max() / np.abs(base[k][inner]).max() for k in range(3))
+    per, per0, perb = t1 / planes, t0 / planes, tb / 3
+    label = f"focal stack {n_px}x{n_px} raw px (PMR 14 hex, {lf.shape}), per plane"
+    emit(label, per, "shift-and-add, scipy.ndimage.shift per view", perb, f"max |diff| {err:.1e} relative (inner)",
+         f"pre-issue kernel {per0 * 1e3:.1f} ms/plane ({per0 / per:.1f}x ours)")
+    d0 = float(np.max(np.abs(st - st0)) / np.abs(st0).max())
+    return per, per0, d0
+
+
+def big_stack_row(crop_px, planes_timed):
+    """1000 planes of a 6600x4400 raw image, from a crop: time per plane per raw pixel."""
+    from bench_lightfield import synthetic_lf
+    from reference_refocus import focal_stack as focal_stack_reference
+
+    from mitpiv import lightfield as lfm
+    from mitpiv.physics.plenoptic import PlenopticCamera
+
+    cam = PlenopticCamera(resolution=(crop_px, crop_px), pixel_pitch_um=5.5, focal_length_mm=50, f_number=2.8,
+                          focus_distance_mm=250, mla_pitch_um=77.0, mla_layout="hex")
+    lf = synthetic_lf(cam)
+    z = np.linspace(-30, 30, 1000)[:: max(1, 1000 // planes_timed)][:planes_timed]
+    lfm.focal_stack(lf, z[:1])
+    focal_stack_reference(lf, z[:1])
+    _, t1, _ = timed(lfm.focal_stack, lf, z)
+    _, t0, _ = timed(focal_stack_reference, lf, z)
+    k = 1000 / len(z) * (6600 * 4400) / crop_px**2
+    emit(f"1000-plane focal stack 6600x4400 (from a {crop_px}^2 crop, {len(z)} planes)", t1 * k,
+         "pre-issue plane kernel, same extrapolation", t0 * k, "same kernel output (see focal-stack row)",
+         f"extrapolated x{k:.0f}; paper: about 10 h per image per core")
+
+
+# ------------------------------------------------------------------------------ scaling
+def scaling(quick):
+    print("\n### Scaling\n")
+    small = mart_case(0.1)
+    rc.mart(small[2], small[0], small[3], iterations=1)  # compile / load the kernels outside the timings
+    sizes, times = [], []
+    for s in ((0.15, 0.2, 0.3, 0.4) if quick else (0.25, 0.35, 0.5, 0.7)):
+        cams, pts, imgs, grid = mart_case(s)
+        (v, info), t, _ = timed(rc.mart, imgs, cams, grid, iterations=10, return_info=True, residuals="final")
+        sizes.append(grid.n_voxels)
+        times.append(t)
+        line = (f"MART 10 it: {grid.n_voxels / 1e6:.2f} M voxels, {info['active_voxels'] / 1e6:.2f} M active: {t:.1f} s, "
+                f"memory {info['memory_bytes'] / grid.n_voxels:.1f} B/voxel")
+        print(line, flush=True)
+        ROWS.append(f"| scaling | {line} | | | | | |")
+    p = np.polyfit(np.log(sizes), np.log(times), 1)[0]
+    ROWS.append(f"| scaling | MART time ~ voxels^{p:.2f} | | | | | |")
+    print(f"MART time ~ voxels^{p:.2f}")
+    from bench_analysis import volumes
+
+    grid, a, b, _, dt, _ = volumes((40, 80, 80))
+    an.piv3d(a, b, grid, windows=(32, 24, 16), overlap=0.5, dt_s=dt)  # compile / load the kernels outside the timings
+    sizes, times = [], []
+    for shape in (((48, 96, 96), (48, 128, 128), (64, 160, 160), (64, 192, 192)) if quick else
+                  ((64, 128, 128), (64, 192, 192), (80, 256, 256), (80, 320, 320))):
+        grid, a, b, flow, dt, _ = volumes(shape)
+        f, t, _ = timed(an.piv3d, a, b, grid, windows=(32, 24, 16) if quick else (64, 48, 32), overlap=0.75, dt_s=dt)
+        sizes.append(f.n_vectors)
+        times.append(t)
+        line = f"PIV: {f.n_vectors} vectors ({'x'.join(map(str, shape[::-1]))}): {t:.1f} s"
+        print(line, flush=True)
+        ROWS.append(f"| scaling | {line} | | | | | |")
+    p = np.polyfit(np.log(sizes), np.log(times), 1)[0]
+    ROWS.append(f"| scaling | PIV time ~ vectors^{p:.2f} | | | | | |")
+    print(f"PIV time ~ vectors^{p:.2f}")
+
+
+def machine():
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    except OSError:
+        commit = "unknown"
+    cpu = "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return (f"{platform.node()} ({cpu}, {os.cpu_count()} cores, Python {platform.python_version()}), commit {commit}, "
+            f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC, load average at the end "
+            f"{', '.join(f'{x:.1f}' for x in os.getloadavg())}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--quick", action="store_true", help="smaller cases (a few minutes)")
+    ap.add_argument("--scale", type=float, default=None, help="MART lateral scale (1 = 480x320x130)")
+    ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks.md"))
+    ap.add_argument("--sections", default="mart,piv,focal,big,scaling", help="comma-separated subset to run")
+    a = ap.parse_args(argv)
+    scale = a.scale or (0.3 if a.quick else 0.5)
+    print("| stage | ours | baseline | baseline time | ratio | accuracy | notes |")
+    print("|---|---|---|---|---|---|---|")
+    sections = set(a.sections.split(","))
+    if "mart" in sections:
+        mart_rows(scale, 10 if a.quick else 40)
+    if "piv" in sections:
+        piv_rows((64, 160, 160) if a.quick else (80, 256, 256))
+    if "focal" in sections:
+        focal_rows(800 if a.quick else 1600, 11 if a.quick else 21)
+    if "big" in sections:
+        big_stack_row(1600 if a.quick else 3300, 16 if a.quick else 32)
+    if "scaling" in sections:
+        scaling(a.quick)
+    text = ("# Benchmarks (issue 26)\n\nWritten by `python bench/bench_speed.py"
+            + (" --quick" if a.quick else "") + f"` (`make bench`). Machine: {machine()}.\n\n"
+            "The machine is shared with other jobs: absolute times are noisy; each ratio compares two "
+            "codes timed one after the other in the same run. Baselines: the pre-issue code paths are frozen "
+            "copies (bench/reference_mart.py, bench/reference_piv3d.py, bench/reference_refocus.py).\n\n"
+            "| stage | ours | baseline | baseline time | ratio | accuracy | notes |\n|---|---|---|---|---|---|---|\n"
+            + "\n".join(ROWS) + "\n")
+    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(a.out).write_text(text)
+    print(f"\nwritten: {a.out}")
+
+
+if __name__ == "__main__":
+    main()

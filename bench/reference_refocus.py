@@ -1,0 +1,338 @@
+"""Frozen copy of mitpiv.lightfield.refocus as of commit bec7139 (before issue 26): the
+baseline the benchmark prints beside today's focal stack in the same run. Bench-only.
+
+Original module docstring follows.
+Refocusing a light field: additive (shift-and-add) and multiplicative, focal stacks,
+and direct refocusing onto a world voxel grid.
+
+For a view through aperture point ``a`` and an output point whose chief ray meets the MLA
+plane at ``X`` (pinhole projection through the lens centre), the ray from ``a`` through
+the point's image meets the MLA at ``X + (1 - 1/alpha) a`` (Ng 2005, exact for the thin
+lens). ``alpha = s_i'/s_i`` of the refocus plane; a world point at local ``(x, y, z)`` has
+``X = -(x, y) s_i / z`` and ``alpha = s_i' / s_i`` of its own image distance.
+
+* additive: ``E = sum_w w L_a(.) / sum_w w`` over the views with weight ``w > 0``;
+* multiplicative (multi-plenoptic PIV): ``E = (prod_a L_a(.)^w_a)^(1 / sum w)``, weights
+  ``w`` from the white image, so a point is bright only where every view sees light.
+
+Samples falling outside the light field are left out of both (the weight sum counts only
+the views that land inside); an output point that fewer than ``min_view_fraction`` of the
+total view weight reaches (the borders of a refocused plane) is set to zero rather than
+estimated from a few views. The kernels run in parallel over output rows (Numba).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+
+import numpy as np
+
+from mitpiv._numba import numba
+from mitpiv.errors import ConfigError
+from mitpiv.io.arrays import stack_output
+from mitpiv.lightfield.decode import LightField
+from mitpiv.lightfield.geometry import alpha_from_z, z_from_alpha
+from mitpiv.progress import Progress, track
+
+__all__ = ["refocus", "focal_stack", "refocus_volume", "grid_steps", "METHODS"]
+
+log = logging.getLogger(__name__)
+
+METHODS = ("additive", "multiplicative")
+_EPS = 1e-6  # grid units: samples this close outside the border count as on it
+
+
+_KERNELS = {}
+
+
+def _kernels():
+    if _KERNELS:
+        return _KERNELS
+    nb = numba()
+
+    @nb.njit(inline="always", cache=True)
+    def on_grid(x, n):
+        """x snapped onto [0, n-1] when it is within rounding of the border; NaN outside."""
+        if -_EPS < x < 0.0 or n - 1 < x < n - 1 + _EPS:
+            x = min(max(x, 0.0), n - 1.0)
+        return x if 0.0 <= x <= n - 1 else math.nan
+
+    @nb.njit(inline="always", cache=True)
+    def cell(x, n):
+        """Lower node, fraction and upper node of the linear interpolation at x."""
+        x0 = min(int(math.floor(x)), n - 2) if n > 1 else 0
+        return x0, x - x0, min(x0 + 1, n - 1)
+
+    @nb.njit(inline="always", cache=True)
+    def bilinear(img, y0, fy, y1, x0, fx, x1):
+        return (1.0 - fy) * ((1.0 - fx) * img[y0, x0] + fx * img[y0, x1]) + fy * ((1.0 - fx) * img[y1, x0] + fx * img[y1, x1])
+
+    @nb.njit(inline="always", cache=True)
+    def result(acc, wacc, dark, wmin, mult):
+        if wacc <= 0.0 or wacc < wmin or (mult and dark):
+            return 0.0
+        return math.exp(acc / wacc) if mult else acc / wacc
+
+    @nb.njit(parallel=True, fastmath=False, cache=True)
+    def plane(views, w, base_s, base_t, sh_u, sh_v, mult, nearest, wmin, out):
+        nv, nu, nt, ns = views.shape
+        for ti in nb.prange(base_t.shape[0]):
+            m = base_s.shape[0]
+            acc = np.zeros(m)
+            wacc = np.zeros(m)
+            dark = np.zeros(m, np.bool_)
+            for iv in range(nv):
+                y = on_grid(base_t[ti] + sh_v[iv], nt)
+                if math.isnan(y):
+                    continue
+                if nearest:
+                    y = math.floor(y + 0.5)
+                y0, fy, y1 = cell(y, nt)
+                for iu in range(nu):
+                    wt = w[iv, iu]
+                    if wt <= 0.0:
+                        continue
+                    img = views[iv, iu]
+                    for si in range(m):
+                        x = on_grid(base_s[si] + sh_u[iu], ns)
+                        if math.isnan(x):
+                            continue
+                        if nearest:
+                            x = math.floor(x + 0.5)
+                        x0, fx, x1 = cell(x, ns)
+                        val = bilinear(img, y0, fy, y1, x0, fx, x1)
+                        if not mult:
+                            acc[si] += wt * val
+                        elif val > 0.0:
+                            acc[si] += wt * math.log(val)
+                        else:
+                            dark[si] = True
+                        wacc[si] += wt
+            for si in range(m):
+                out[ti, si] = result(acc[si], wacc[si], dark[si], wmin, mult)
+
+    @nb.njit(parallel=True, fastmath=False, cache=True)
+    def points(views, w, bs, bt, gs, gt, au, av, mult, wmin, out):
+        """Per output point (flattened): position (bs, bt) + (gs au[iu], gt av[iv]) in grid units."""
+        nv, nu, nt, ns = views.shape
+        for k in nb.prange(bs.shape[0]):
+            acc = 0.0
+            wacc = 0.0
+            dark = False
+            for iv in range(nv):
+                y = on_grid(bt[k] + gt[k] * av[iv], nt)
+                if math.isnan(y):
+                    continue
+                y0, fy, y1 = cell(y, nt)
+                for iu in range(nu):
+                    wt = w[iv, iu]
+                    if wt <= 0.0:
+                        continue
+                    x = on_grid(bs[k] + gs[k] * au[iu], ns)
+                    if math.isnan(x):
+                        continue
+                    x0, fx, x1 = cell(x, ns)
+                    val = bilinear(views[iv, iu], y0, fy, y1, x0, fx, x1)
+                    if not mult:
+                        acc += wt * val
+                    elif val > 0.0:
+                        acc += wt * math.log(val)
+                    else:
+                        dark = True
+                    wacc += wt
+            out[k] = result(acc, wacc, dark, wmin, mult)
+
+    _KERNELS.update(plane=plane, points=points)
+    return _KERNELS
+
+
+def _check_method(method):
+    if method not in METHODS:
+        raise ConfigError(f"refocus: 'method' must be one of {METHODS}, got {method!r}.")
+
+
+def _weights(lf: LightField, weights):
+    w = lf.view_weights if weights is None else np.asarray(weights, dtype=np.float64)
+    if w.shape != lf.data.shape[:2]:
+        raise ConfigError(f"refocus: 'weights' must have shape {lf.data.shape[:2]} (n_v, n_u), got {w.shape}.")
+    if not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
+        raise ConfigError("refocus: 'weights' must be finite, >= 0 and not all zero.")
+    return np.ascontiguousarray(w)
+
+
+def _wmin(w, fraction) -> float:
+    if not 0.0 <= fraction <= 1.0:
+        raise ConfigError(f"refocus: 'min_view_fraction' must lie in [0, 1], got {fraction!r}.")
+    return float(fraction * w.sum() * (1 - 1e-9))
+
+
+def grid_steps(lf: LightField) -> tuple[float, float]:
+    """Spacing ``(ds, dt)`` [sensor px] of a light field's spatial grid along s and t (1 where
+    an axis has one sample): refocused-image index ``(i, j)`` sits at sensor pixel
+    ``(lf.s_px[0] + i ds, lf.t_px[0] + j dt)``."""
+    ds = lf.s_px[1] - lf.s_px[0] if len(lf.s_px) > 1 else 1.0
+    dt = lf.t_px[1] - lf.t_px[0] if len(lf.t_px) > 1 else 1.0
+    return ds, dt
+
+
+_grid_steps = grid_steps  # deprecated private name
+
+
+def _plane_geometry(lf: LightField, alpha: float, magnification: str, z_mm: float | None):
+    """Grid-unit positions (base_s, base_t) and per-view shifts (sh_u, sh_v) of one plane."""
+    if not (np.isfinite(alpha) and alpha > 0):
+        raise ConfigError(f"refocus: 'alpha' must be finite and > 0, got {alpha!r}.")
+    ds, dt = grid_steps(lf)
+    gamma = 1.0 - 1.0 / alpha
+    kappa = 1.0
+    if magnification == "constant":
+        o = lf._need_optics("constant-magnification refocusing")
+        if z_mm is None:
+            z_mm = z_from_alpha(alpha, focal_length_mm=o.focal_length_mm, magnification=o.magnification)
+        kappa = o.focus_distance_mm / (o.focus_distance_mm + z_mm)
+    elif magnification != "natural":
+        raise ConfigError(f"refocus: 'magnification' must be 'natural' or 'constant', got {magnification!r}.")
+    # Shift of view a on the MLA plane: gamma a (mm) = gamma * (-du p s_i / g) = gamma * du * (-s_i/g) px
+    # of the sensor, i.e. gamma * du * (-s_i/g) / (1 + g/s_i)-scaled lattice units (px of the grid).
+    o = lf._need_optics("refocus")  # s_i / g converts pixel offsets to aperture points
+    k = -o.image_distance_mm / o.gap_mm * o.image_scale  # aperture offset in lattice-image pixels per du
+    cx, cy = o.resolution[0] / 2.0, o.resolution[1] / 2.0  # constant magnification scales about the axis
+    base_s = ((cx + kappa * (lf.s_px - cx)) - lf.s_px[0]) / ds
+    base_t = ((cy + kappa * (lf.t_px - cy)) - lf.t_px[0]) / dt
+    sh_u = gamma * k * lf.du_px / ds
+    sh_v = gamma * k * lf.du_px / dt
+    return base_s, base_t, sh_u, sh_v
+
+
+def refocus(lf: LightField, alpha: float, *, method: str = "additive", magnification: str = "natural",
+            weights=None, interpolation: str = "linear", min_view_fraction: float = 0.5) -> np.ndarray:
+    """Refocus onto the plane ``alpha = s_i'/s_i`` (1: the MLA plane / focal plane).
+
+    Parameters
+    ----------
+    lf : LightField
+    alpha : float
+    method : "additive" | "multiplicative"
+    magnification : "natural" | "constant"
+        natural: Ng's refocusing, output samples on the chief rays of the lenslet grid
+        (object-space sampling grows with distance, as in a photograph); constant: every
+        plane sampled on the object-space grid of the focal plane (needs the optics).
+    weights : (n_v, n_u), optional
+        View weights (default ``lf.view_weights``).
+    interpolation : "linear" | "nearest"
+        Resampling of the sub-aperture images.
+    min_view_fraction : float
+        Output points reached by less than this fraction of the view weight are zero.
+
+    Returns
+    -------
+    (n_t, n_s) float32 image
+    """
+    _check_method(method)
+    if interpolation not in ("linear", "nearest"):
+        raise ConfigError(f"refocus: 'interpolation' must be 'linear' or 'nearest', got {interpolation!r}.")
+    w = _weights(lf, weights)
+    out = np.empty((len(lf.t_px), len(lf.s_px)), np.float32)
+    base_s, base_t, sh_u, sh_v = _plane_geometry(lf, float(alpha), magnification, None)
+    _kernels()["plane"](lf.data, w, base_s, base_t, sh_u, sh_v, method == "multiplicative", interpolation == "nearest",
+                        _wmin(w, min_view_fraction), out)
+    return out
+
+
+def focal_stack(lf: LightField, z_mm, *, method: str = "additive", magnification: str = "natural", weights=None,
+                interpolation: str = "linear", min_view_fraction: float = 0.5, out=None,
+                progress: Progress = None) -> np.ndarray:
+    """Refocused images at depths ``z_mm`` from the focal plane (positive = farther).
+
+    Parameters
+    ----------
+    lf : LightField
+        Must carry its optics (alpha from z by the thin-lens equation).
+    z_mm : sequence of float
+    out : path, optional
+        Stream the planes into this ``.npy`` file (memory-mapped; the stack never has to
+        fit in memory) and return the memory map. Stacks over 2 GiB require it.
+    progress : None, bool or callable
+        One step per plane (desc ``"focal stack: planes"``); see :mod:`mitpiv.progress`.
+
+    Returns
+    -------
+    (n_z, n_t, n_s) float32 array (or a memory map of ``out``)
+    """
+    _check_method(method)
+    o = lf._need_optics("focal_stack")
+    z = np.atleast_1d(np.asarray(z_mm, dtype=np.float64))
+    if z.ndim != 1 or len(z) == 0:
+        raise ConfigError(f"focal_stack: 'z_mm' must be a non-empty 1D sequence, got shape {z.shape}.")
+    alphas = alpha_from_z(z, focal_length_mm=o.focal_length_mm, magnification=o.magnification)
+    w = _weights(lf, weights)
+    shape = (len(z), len(lf.t_px), len(lf.s_px))
+    kern = _kernels()["plane"]
+    t0 = time.perf_counter()
+    with stack_output(shape, out, "focal_stack") as stack:
+        planes = track(enumerate(zip(z, alphas, strict=True)), total=len(z), desc="focal stack: planes",
+                       progress=progress, unit="plane")
+        for k, (zk, ak) in planes:
+            base_s, base_t, sh_u, sh_v = _plane_geometry(lf, float(ak), magnification, float(zk))
+            kern(lf.data, w, base_s, base_t, sh_u, sh_v, method == "multiplicative", interpolation == "nearest",
+                 _wmin(w, min_view_fraction), stack[k])
+        el = time.perf_counter() - t0
+        log.debug("focal stack: %d planes in %.1f s, %.1f ms/plane", len(z), el, el / len(z) * 1e3)
+        result = stack if out is None else None
+    return result if out is None else np.load(out, mmap_mode="r")
+
+
+def refocus_volume(lf: LightField, x_mm, y_mm, z_mm, *, method: str = "additive", weights=None,
+                   min_view_fraction: float = 0.5, out=None, progress: Progress = None) -> np.ndarray:
+    """Refocus directly onto a world voxel grid (any camera pose).
+
+    For each voxel centre ``(x, y, z)`` (world mm) and each view, the ray from the view's
+    aperture point through the voxel's thin-lens image is followed to the MLA plane and
+    the sub-aperture image sampled there.
+
+    Returns
+    -------
+    (n_z, n_y, n_x) float32 volume (or a memory map of ``out``, a ``.npy`` path)
+    """
+    _check_method(method)
+    o = lf._need_optics("refocus_volume")
+    xs, ys, zs = (np.atleast_1d(np.asarray(a, dtype=np.float64)) for a in (x_mm, y_mm, z_mm))
+    w = _weights(lf, weights)
+    shape = (len(zs), len(ys), len(xs))
+    ds, dt = grid_steps(lf)
+    pp = o.pixel_pitch_um * 1e-3
+    si, f = o.image_distance_mm, o.focal_length_mm
+    a = lf.aperture_mm
+    cx, cy = o.resolution[0] / 2.0, o.resolution[1] / 2.0
+    sc = o.image_scale / pp  # MLA-plane mm -> lattice-image px
+    kern = _kernels()["points"]
+    yy, xx = np.meshgrid(ys, xs, indexing="ij")
+    with stack_output(shape, out, "refocus_volume") as stack:
+        for k, zw in enumerate(track(zs, desc="refocus_volume: planes", progress=progress, unit="plane")):
+            loc = o.world_to_local(np.stack([xx, yy, np.full_like(xx, zw)], axis=-1).reshape(-1, 3))
+            if np.any(loc[:, 2] <= f):
+                raise ConfigError(f"refocus_volume: voxels at z = {zw} mm lie within the focal length of the main lens "
+                                  f"(or behind the camera); move the grid in front of the camera.")
+            gamma = 1.0 - si * (loc[:, 2] - f) / (f * loc[:, 2])  # 1 - s_i / s_i'
+            bs = (-loc[:, 0] * si / loc[:, 2] * sc + cx - lf.s_px[0]) / ds  # chief ray on the MLA, grid units
+            bt = (-loc[:, 1] * si / loc[:, 2] * sc + cy - lf.t_px[0]) / dt
+            res = np.empty(len(bs), np.float32)
+            kern(lf.data, w, bs, bt, gamma * sc / ds, gamma * sc / dt, a, a, method == "multiplicative",
+                 _wmin(w, min_view_fraction), res)
+            stack[k] = res.reshape(len(ys), len(xs))
+        result = stack if out is None else None
+    return result if out is None else np.load(out, mmap_mode="r")
+
+
+def stack_depth(camera, points_world) -> np.ndarray:
+    """Depth from the focal plane (+ farther, the focal-stack convention) of world points."""
+    return camera.world_to_local(points_world)[..., 2] - camera.focus_distance_mm
+
+
+def stack_pixels(lf, u_index, v_index):
+    """Refocused-image indices (column, row; pixel centres at integers) -> sensor pixels of
+    the lenslet lattice, the coordinates a :class:`Dewarp` is fitted in."""
+    ds, dt = grid_steps(lf)
+    return lf.s_px[0] + np.asarray(u_index) * ds, lf.t_px[0] + np.asarray(v_index) * dt
