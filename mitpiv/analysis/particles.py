@@ -228,6 +228,8 @@ class MatchResult:
     pairs : (K, 2) indices (found, truth) into the arrays given to :func:`match`.
     errors_mm : (K, 3) found - truth in (x, y, z).
     n_found, n_truth : particles considered (truth restricted to the grid when one is given).
+    found_mm : (n_found, 3) the found positions [mm] (ghosts included), or None (matches
+        saved before mitpiv kept them).
     """
 
     pairs: np.ndarray
@@ -237,6 +239,7 @@ class MatchResult:
     radius_mm: float
     voxel_mm: tuple | None = None
     truth_index: np.ndarray = field(default=None, repr=False)
+    found_mm: np.ndarray = field(default=None, repr=False)
 
     @property
     def n_matched(self) -> int:
@@ -400,4 +403,4 @@ def match(found, truth, *, radius_mm: float | None = None, grid=None, radius_vox
     pairs[:, 1] = tidx[pairs[:, 1]]
     err = f[pairs[:, 0]] - t[pairs[:, 1]]
     return MatchResult(pairs, err, f.shape[0], int(tidx.size), float(radius_mm),
-                       tuple(voxel_mm) if voxel_mm is not None else None, tidx)
+                       tuple(voxel_mm) if voxel_mm is not None else None, tidx, f)

@@ -18,11 +18,13 @@ default and range)::
     [reconstruction]   method, bounds_mm, voxel_mm, iterations, ...
     [piv]              windows, overlap, deform, interpolation, ...
     [particles]        method, threshold_rel, radius_voxels
+    [output]           vtk = true: ParaView files in RUN/vtk (mitpiv.studies.export)
 
 Stages: ``particles`` (seeding, advection, PLY files, truth), ``render`` (EXR per camera
 and frame), ``sensor`` (counts; only with a [sensor] table), ``reconstruct`` (volume per
 frame), ``evaluate`` (particles and quality per frame), ``piv`` (vector field and its error
-against the flow), ``report`` (report.md and figures, :mod:`mitpiv.studies.report`).
+against the flow), ``report`` (report.md and figures, :mod:`mitpiv.studies.report`), ``vtk``
+(only with ``[output] vtk = true``: :func:`mitpiv.studies.export.export_vtk`).
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ from mitpiv.studies.runner import Kind, Stage, StageContext
 from mitpiv.studies.schema import Table, Vec3, discriminated, model_from_signature
 
 FRAMES = (0, 1)
-STAGES = ("particles", "render", "sensor", "reconstruct", "evaluate", "piv", "report")
+STAGES = ("particles", "render", "sensor", "reconstruct", "evaluate", "piv", "report", "vtk")
 
 PosFloat = Annotated[float, Field(gt=0)]
 
@@ -176,6 +178,13 @@ class ParticlesTable(Table):
     radius_voxels: PosFloat = Field(2.0, description="matching search radius [voxels]")
 
 
+class OutputTable(Table):
+    """Extra files a run writes beside its report."""
+
+    vtk: bool = Field(False, description="ParaView / VTK files of volumes, PIV field, particles and tracks in "
+                                         "RUN/vtk (mitpiv.studies.export)")
+
+
 @cache
 def schema():
     """The tomo experiment model (built once: the flow and sensor tables come from the physics)."""
@@ -194,6 +203,7 @@ def schema():
         "reconstruction": (ReconstructionTable, Field(..., description="volume reconstruction")),
         "piv": (PivTable, Field(default_factory=PivTable, description="3D PIV")),
         "particles": (ParticlesTable, Field(default_factory=ParticlesTable, description="particle evaluation")),
+        "output": (OutputTable, Field(default_factory=OutputTable, description="extra output files")),
     }
     model = create_model("TomoExperiment", __base__=Table,
                          __doc__="A particle-image experiment: seeding, flow, render, reconstruction, "
@@ -412,6 +422,12 @@ def stage_report(ctx: StageContext) -> dict:
     return report.write(report.tomo_report(ctx.cfg, ctx.run_dir, ctx.results, ctx.timings), ctx.out)
 
 
+def stage_vtk(ctx: StageContext) -> dict:
+    from mitpiv.studies.export import export_vtk
+
+    return {"files": [f.name for f in export_vtk(ctx.run_dir, ctx.out, progress=ctx.progress)]}
+
+
 def stages(cfg) -> list[Stage]:
     out = [Stage("particles", ("seed", "seeding", "flow", "scene"), stage_particles),
            Stage("render", ("scene", "render"), stage_render)]
@@ -421,6 +437,8 @@ def stages(cfg) -> list[Stage]:
             Stage("evaluate", ("particles",), stage_evaluate),
             Stage("piv", ("piv",), stage_piv),
             Stage("report", (), stage_report)]
+    if cfg.output.vtk:
+        out.append(Stage("vtk", ("output",), stage_vtk))
     return out
 
 
