@@ -200,3 +200,43 @@ def test_export_of_matches_without_found_positions_finds_them_again(run, tmp_pat
         a = vtk_to_numpy(_read(old / "vtk" / f"particles_found_{frame}.vtu").GetPoints().GetData())
         b = vtk_to_numpy(_read(rd / "vtk" / f"particles_found_{frame}.vtu").GetPoints().GetData())
         np.testing.assert_array_equal(a, b)
+
+
+def test_report_shows_the_flow(run):
+    """The report embeds the flow slice, the velocity profiles and the 3D particle view."""
+    _, rd, _ = run
+    md = (rd / "report" / "report.md").read_text()
+    for f in ("flow_slice.png", "velocity_profiles.png", "particles_3d.png"):
+        assert f"({f})" in md, f
+        assert (rd / "report" / f).stat().st_size > 20_000, f  # a drawn figure, not an empty canvas
+
+
+def test_sweep_plot_has_error_bars_over_seeds(tmp_path, monkeypatch):
+    """Three seeds per x: the plotted points are the mean and the bars one standard
+    deviation (ddof 1) over the seeds, computed here afresh; points that differ in another
+    parameter stay separate."""
+    import pandas as pd
+
+    from mitpiv.studies import report
+
+    figs = []
+    monkeypatch.setattr(report, "save_figure", lambda fig, path, **kw: figs.append(fig))
+    rng = np.random.default_rng(0)
+    xs, seeds = [1, 3, 10], [0, 1, 2]
+    q = {(x, s): 0.5 + 0.02 * x + 0.05 * rng.normal() for x in xs for s in seeds}
+    df = pd.DataFrame({"param.reconstruction.iterations": [x for x in xs for _ in seeds],
+                       "param.seed": [s for _ in xs for s in seeds],
+                       "frame0.Q": [q[x, s] for x in xs for s in seeds], "status": ["ok"] * 9})
+    report.plot_sweep(df.sample(frac=1, random_state=1), "reconstruction.iterations", "frame0.Q", tmp_path / "s.png")
+    ax = figs[-1].axes[0]
+    (line,) = ax.lines[:1]
+    np.testing.assert_array_equal(np.asarray(line.get_xdata(), float), xs)
+    np.testing.assert_allclose(np.asarray(line.get_ydata(), float), [np.mean([q[x, s] for s in seeds]) for x in xs], rtol=1e-12)
+    bars = ax.collections[0].get_segments()  # one vertical segment per x: mean -+ sd
+    sd = [np.std([q[x, s] for s in seeds], ddof=1) for x in xs]
+    np.testing.assert_allclose([b[1, 1] - b[0, 1] for b in bars], 2 * np.asarray(sd), rtol=1e-12)
+    assert "3 seeds" in ax.get_legend().get_texts()[0].get_text()
+    # the same x with another parameter changing: points drawn one by one, no bars
+    df2 = df.assign(**{"param.seeding.ppp": [0.05, 0.1, 0.2] * 3})
+    report.plot_sweep(df2, "reconstruction.iterations", "frame0.Q", tmp_path / "t.png")
+    assert len(figs[-1].axes[0].collections) == 0 and len(figs[-1].axes[0].lines[0].get_xdata()) == 9
