@@ -358,6 +358,30 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_replicate(args) -> int:
+    from mitpiv.studies.replication import get_study, list_studies, replicate
+
+    if args.list or args.study is None:
+        names = list_studies()
+        if not names:
+            print("no replications are registered yet")
+        for n in names:
+            st = get_study(n)
+            print(f"{n:20s} {st.title} (paper {st.paper})")
+        if args.study is None and not args.list:
+            raise MitpivError("replicate: name a study (see the list above), e.g. mitpiv replicate NAME --quick.")
+        return 0
+    res = replicate(args.study, args.out, quick=args.quick, seed=args.seed, workers=args.workers,
+                    progress=_progress(args))
+    rows = res["rows"]
+    n_ok = sum(1 for r in rows if r["agrees"] is True)
+    n_cmp = sum(1 for r in rows if r["agrees"] is not None)
+    out = args.out or f"out/replicate/{args.study}{'-quick' if args.quick else ''}"
+    print(f"{args.study} ({res['scale']}): {n_ok}/{n_cmp} rows agree with the paper, {res['wall_s']:.0f} s "
+          f"-> {out}/report.md, results.json")
+    return 0
+
+
 def _progress(args) -> bool:
     return not getattr(args, "quiet", False)
 
@@ -522,6 +546,15 @@ def main(argv=None) -> int:
                    help="comma-separated subset of render,lightfield,reconstruct,piv,end_to_end (default all)")
     b.add_argument("--seed", type=int, default=0, help="seed of the particle field")
     b.set_defaults(func=cmd_bench)
+    rp = sub.add_parser("replicate", help="replicate a published study (the paper's set-up and measures, "
+                        "results side by side)")
+    rp.add_argument("study", nargs="?", default=None, help="study name (see --list)")
+    rp.add_argument("--list", action="store_true", help="list the replications and their papers")
+    rp.add_argument("--quick", action="store_true", help="the reduced study (minutes; same code and row ids)")
+    rp.add_argument("--out", default=None, help="output folder (default out/replicate/NAME[-quick]); resumes")
+    rp.add_argument("--seed", type=int, default=0, help="base seed of every random stream")
+    rp.add_argument("--workers", type=int, default=1, help="local Dask worker processes for independent points")
+    rp.set_defaults(func=cmd_replicate)
     args = p.parse_args(argv)
     from mitpiv.progress import set_quiet
 

@@ -1,0 +1,7 @@
+"""The replications of the five published studies (REPLICATION.md): one module per study,
+each defining ``STUDY = mitpiv.studies.replication.Study(...)``. ``MODULES`` maps the CLI
+name (``mitpiv replicate NAME``) to the module, imported on first use."""
+
+#: study name -> module defining STUDY
+MODULES: dict[str, str] = {
+}
