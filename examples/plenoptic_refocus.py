@@ -69,13 +69,19 @@ stack = lfm.focal_stack(lf, -depths, method="multiplicative")
 zs = np.linspace(-10, 10, 41)
 scan = lfm.focal_stack(lf, zs, method="multiplicative").reshape(len(zs), -1).max(axis=1)
 
+def centre(img, half):
+    """The central (2 half) x (2 half) pixels of an image (the particles sit near the axis)."""
+    r, c = img.shape[0] // 2, img.shape[1] // 2
+    return img[r - half:r + half, c - half:c + half]
+
+
 fig, ax = plt.subplots(1, 5, figsize=(17, 3.6), constrained_layout=True)
-ax[0].imshow(raw, cmap="gray", vmax=np.percentile(raw, 99.9))
-ax[0].set_title("raw plenoptic image")
+ax[0].imshow(centre(raw, 60), cmap="gray", vmax=np.percentile(raw, 99.9))
+ax[0].set_title("raw plenoptic image (centre)")
 ax[0].set_xlabel("pixel")
 ax[0].set_ylabel("pixel")
 for k, z in enumerate(depths):
-    ax[k + 1].imshow(stack[k], cmap="gray", origin="upper")
+    ax[k + 1].imshow(centre(stack[k], 7), cmap="gray", origin="upper")
     ax[k + 1].set_title(f"refocused at world z = {z:+.0f} mm")
     ax[k + 1].set_xlabel("lenslet")
 ax[4].plot(-zs, scan / scan.max(), "k")

@@ -326,6 +326,8 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
           smooth: str | None = "gaussian", chunk_mb: float = 256.0, progress: Progress = None) -> VectorField:
     """Multi-pass 3D cross-correlation PIV between two volumes on ``grid``.
 
+    Parameters
+    ----------
     windows : window edge per pass, a sequence with one entry per pass (``(64, 48, 32)``:
         three passes); each entry is one size for all axes or (w_x, w_y, w_z), so a
         single anisotropic pass is ``[(64, 64, 32)]``. A bare int is one pass. Repeat a
@@ -468,8 +470,8 @@ def uod(field: VectorField, *, threshold: float = 2.0, epsilon: float = 0.1, com
     """Universal outlier detection (Westerweel & Scarano 2005), in 3D.
 
     For each component (in voxels of displacement) with U_i the up to 26 valid neighbours
-    (the centre excluded from both medians): U_m = median U_i, r_m = median |U_i - U_m|,
-    r = |U_0 - U_m| / (r_m + epsilon). ``combine="max"``: a vector is an outlier when
+    (the centre excluded from both medians): ``U_m = median U_i``, ``r_m = median |U_i - U_m|``,
+    ``r = |U_0 - U_m| / (r_m + epsilon)``. ``combine="max"``: a vector is an outlier when
     any component's r exceeds ``threshold``; ``"norm"``: when sqrt(r_u^2 + r_v^2 + r_w^2)
     does. Vectors with fewer than ``min_neighbours`` valid neighbours are not tested.
     Invalid vectors are never outliers but are filled when ``replace`` is given

@@ -137,6 +137,8 @@ def run_sweep(path, out_dir, scheduler=None, *, workers: int | None = None, full
               processes: bool = True, progress: Progress = None):
     """Run every point of the study in ``path`` on Dask; returns the results table (pandas).
 
+    Parameters
+    ----------
     scheduler : None: a LocalCluster of ``workers`` single-threaded processes (default: the
         study's ``workers`` or 2); else the address of a running Dask scheduler.
     full : apply the study's [full] overrides (the full-size study) to every point.
