@@ -1,7 +1,7 @@
 """A user's own data in: an OpenCV calibration (YAML / XML written by OpenCV's FileStorage,
 plain JSON) becomes a mitpiv camera that projects as OpenCV's ``projectPoints`` does, and
 drives a render (the ``distorted_pinhole`` ``calibration`` property); a particle list in
-CSV drives a render and an experiment (``[seeding] file``)."""
+CSV drives a render (and an experiment: tests/studies/test_outputs.py)."""
 
 import cv2
 import numpy as np
@@ -152,47 +152,3 @@ def test_calibration_file_and_particle_csv_drive_a_render(tmp_path):
                    "to_world": mi.ScalarTransform4f(), "film": {"type": "hdrfilm", "width": SIZE[0],
                                                                 "height": SIZE[1]}})
 
-
-def test_particle_csv_drives_an_experiment(tmp_path, caplog):
-    """[seeding] file: the run's particles are the file's (frame 0), advected by the flow;
-    a changed file reruns the particles stage; file and a count together are refused."""
-    import logging
-    from pathlib import Path
-
-    from mitpiv.io import read_truth
-    from mitpiv.studies import load_experiment, run_config
-
-    scene = Path(__file__).resolve().parents[2] / "scenes" / "tomo4" / "scene.xml"
-    pts = np.random.default_rng(2).uniform([-2, -2, -1], [2, 2, 1], (30, 3))
-    np.savetxt(tmp_path / "mine.csv", np.column_stack([pts, np.full(30, 1.5)]), delimiter=",",
-               header="x_mm,y_mm,z_mm,diameter_um", comments="")
-    exp = tmp_path / "exp.toml"
-    exp.write_text(f"""name = "csv"
-[scene]
-xml = "{scene}"
-params = {{ resolution = 32 }}
-[seeding]
-file = "mine.csv"
-[flow]
-kind = "uniform"
-velocity_mm_s = [100.0, 0.0, 0.0]
-dt_s = 0.002
-[reconstruction]
-bounds_mm = [-2.0, 2.0, -2.0, 2.0, -1.0, 1.0]
-voxel_mm = 0.1
-""")
-    res = run_config(load_experiment(exp), tmp_path / "run", until="render")
-    truth = read_truth(tmp_path / "run" / "particles" / "truth.npz")
-    np.testing.assert_array_equal(truth["positions_mm"][0], pts)
-    np.testing.assert_allclose(truth["positions_mm"][1] - pts, [[0.2, 0.0, 0.0]] * 30, atol=1e-12)
-    np.testing.assert_array_equal(truth["diameters_um"], 1.5)
-    assert res.stages["particles"]["n_particles"] == 30 and len(res.stages["render"]["images"]) == 8
-    np.savetxt(tmp_path / "mine.csv", np.column_stack([pts[:20], np.full(20, 1.5)]), delimiter=",",
-               header="x_mm,y_mm,z_mm,diameter_um", comments="")
-    with caplog.at_level(logging.INFO, logger="mitpiv"):
-        res = run_config(load_experiment(exp), tmp_path / "run", until="particles")
-    assert res.stages["particles"]["n_particles"] == 20 and "particles: done earlier" not in caplog.text
-    with pytest.raises(ConfigError, match="file gives the particles"):
-        load_experiment(exp, {"seeding.count": 10})
-    with pytest.raises(ConfigError, match="box_min_mm and box_max_mm are required"):
-        load_experiment(exp, {"seeding.file": None, "seeding.count": 10})

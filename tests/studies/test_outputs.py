@@ -240,3 +240,52 @@ def test_sweep_plot_has_error_bars_over_seeds(tmp_path, monkeypatch):
     df2 = df.assign(**{"param.seeding.ppp": [0.05, 0.1, 0.2] * 3})
     report.plot_sweep(df2, "reconstruction.iterations", "frame0.Q", tmp_path / "t.png")
     assert len(figs[-1].axes[0].collections) == 0 and len(figs[-1].axes[0].lines[0].get_xdata()) == 9
+
+
+def test_particle_csv_drives_an_experiment(tmp_path, caplog):
+    """[seeding] file: the run's particles are the file's (frame 0), advected by the flow;
+    a changed file reruns the particles stage; file and a count together are refused."""
+    import logging
+    from pathlib import Path
+
+    from mitpiv.io import read_truth
+    from mitpiv.studies import load_experiment, run_config
+
+    # (kept under tests/studies, after tests/render: a live tomo4 scene's nested mie phase,
+    # which has no particle size of its own, breaks a later standalone mie medium render in
+    # the same process; see tests/render/test_mie_render.py::test_mie_phase_in_a_medium_volpath)
+
+    scene = Path(__file__).resolve().parents[2] / "scenes" / "tomo4" / "scene.xml"
+    pts = np.random.default_rng(2).uniform([-2, -2, -1], [2, 2, 1], (30, 3))
+    np.savetxt(tmp_path / "mine.csv", np.column_stack([pts, np.full(30, 1.5)]), delimiter=",",
+               header="x_mm,y_mm,z_mm,diameter_um", comments="")
+    exp = tmp_path / "exp.toml"
+    exp.write_text(f"""name = "csv"
+[scene]
+xml = "{scene}"
+params = {{ resolution = 32 }}
+[seeding]
+file = "mine.csv"
+[flow]
+kind = "uniform"
+velocity_mm_s = [100.0, 0.0, 0.0]
+dt_s = 0.002
+[reconstruction]
+bounds_mm = [-2.0, 2.0, -2.0, 2.0, -1.0, 1.0]
+voxel_mm = 0.1
+""")
+    res = run_config(load_experiment(exp), tmp_path / "run", until="render")
+    truth = read_truth(tmp_path / "run" / "particles" / "truth.npz")
+    np.testing.assert_array_equal(truth["positions_mm"][0], pts)
+    np.testing.assert_allclose(truth["positions_mm"][1] - pts, [[0.2, 0.0, 0.0]] * 30, atol=1e-12)
+    np.testing.assert_array_equal(truth["diameters_um"], 1.5)
+    assert res.stages["particles"]["n_particles"] == 30 and len(res.stages["render"]["images"]) == 8
+    np.savetxt(tmp_path / "mine.csv", np.column_stack([pts[:20], np.full(20, 1.5)]), delimiter=",",
+               header="x_mm,y_mm,z_mm,diameter_um", comments="")
+    with caplog.at_level(logging.INFO, logger="mitpiv"):
+        res = run_config(load_experiment(exp), tmp_path / "run", until="particles")
+    assert res.stages["particles"]["n_particles"] == 20 and "particles: done earlier" not in caplog.text
+    with pytest.raises(ConfigError, match="file gives the particles"):
+        load_experiment(exp, {"seeding.count": 10})
+    with pytest.raises(ConfigError, match="box_min_mm and box_max_mm are required"):
+        load_experiment(exp, {"seeding.file": None, "seeding.count": 10})
