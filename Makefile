@@ -1,9 +1,10 @@
 # mitpiv: `make demo` runs the default experiment; `make test` runs the test suite.
-# Both do all set-up first (virtualenv, dependencies, LLVM for Dr.Jit).
+# `make docs` builds the Sphinx site (docs/_build/html). All do the set-up first (virtualenv,
+# dependencies, LLVM for Dr.Jit).
 PY := .venv/bin/python
 OUT ?= out/tomo4
 
-.PHONY: setup demo test lint bench clean
+.PHONY: setup demo test lint bench clean docs
 
 setup:
 	@bash scripts/setup.sh
@@ -13,6 +14,10 @@ demo: setup
 
 test: setup
 	$(PY) -m pytest -q
+
+docs: setup
+	$(PY) -m sphinx -W --keep-going -E -q -b html docs docs/_build/html
+	@echo "docs -> docs/_build/html/index.html"
 
 lint: setup
 	.venv/bin/ruff check mitpiv tests bench scenes
@@ -28,4 +33,4 @@ bench: setup
 	$(PY) bench/bench_holography.py
 
 clean:
-	rm -rf out .pytest_cache
+	rm -rf out .pytest_cache docs/_build docs/_generated

@@ -574,6 +574,17 @@ def _check_scheduler(address: str, timeout_s: float = 3.0) -> None:
                           f"--scheduler out for a local cluster.") from None
 
 
+def cmd_export(args) -> int:
+    if not args.vtk:
+        print("mitpiv: error: export: choose a format: --vtk (ParaView / VTK files).", file=sys.stderr)
+        return 2
+    from mitpiv.studies.export import export_vtk
+
+    files = export_vtk(args.run, args.out, progress=_progress(args))
+    print(f"{len(files)} VTK files -> {files[-1].parent} (open {files[-1].name} in ParaView)")
+    return 0
+
+
 def cmd_bench(args) -> int:
     from mitpiv.studies.accuracy import accuracy_time
 
@@ -762,6 +773,12 @@ def main(argv=None) -> int:
     w.add_argument("--workers", type=_int_in(1, 512), default=None, help="local cluster worker processes (default 2)")
     w.add_argument("--full", action="store_true", help="the full-size study (the study's [full] overrides)")
     w.set_defaults(func=cmd_sweep)
+    ex = sub.add_parser("export", help="export a finished run folder for other tools (--vtk: ParaView files)")
+    ex.add_argument("run", help="run folder of 'mitpiv run'")
+    ex.add_argument("--vtk", action="store_true", help="volumes (.vti), PIV field (.vts), particles and tracks (.vtu), "
+                    "run.pvd")
+    ex.add_argument("--out", default=None, help="output folder (default RUN/vtk)")
+    ex.set_defaults(func=cmd_export)
     b = sub.add_parser("bench", help="benchmarks: 'accuracy-time' measures every accuracy knob's time and error")
     b.add_argument("which", choices=["accuracy-time"], help="the benchmark to run")
     b.add_argument("--out", default="out/accuracy-time", help="output folder (tables, CSV, Pareto plots)")

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Set up mitpiv on a fresh Debian/Ubuntu machine with Python >= 3.11:
-#  1. create .venv (reused on later runs) and install mitpiv with its test extra;
+#  1. create .venv (reused on later runs) and install mitpiv with its test and docs extras;
 #  2. make sure Dr.Jit's LLVM backend finds LLVM >= 16: if not, install Debian's
 #     libllvm19 when root, else print the exact command to run.
 set -euo pipefail
@@ -14,7 +14,7 @@ stamp=.venv/.mitpiv-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     echo "[setup] installing mitpiv and dependencies into .venv"
     .venv/bin/python -m pip install -q --upgrade pip
-    .venv/bin/python -m pip install -q -e ".[test]"
+    .venv/bin/python -m pip install -q -e ".[test,docs]"
     touch "$stamp"
 fi
 llvm_ok() {

@@ -135,15 +135,19 @@ def find_particles(volume, grid, *, threshold: float | None = None, threshold_re
                    min_distance: int = 1, window: int | None = None) -> FoundParticles:
     """Detect particles as 3D local maxima and localise them to sub-voxel precision.
 
+    Parameters
+    ----------
     volume : (n_z, n_y, n_x) array on ``grid`` (a :class:`~mitpiv.reconstruct.VoxelGrid`).
     threshold : absolute intensity a maximum must exceed; default ``threshold_rel`` times
         the volume maximum.
     method : ``"gauss3"`` (3-point Gaussian per axis; parabolic where a neighbour is <= 0),
-        ``"centroid"`` (intensity-weighted centre of a ``window``^3 box, default 3), or
-        ``"lsq"`` (least-squares 3D Gaussian with background and per-axis widths on a
-        ``window``^3 box, default 5, started from gauss3).
+        ``"centroid"`` (intensity-weighted centre of a cubic box of edge ``window``, default
+        3), or ``"lsq"`` (least-squares 3D Gaussian with background and per-axis widths on
+        a cubic box of edge ``window``, default 5, started from gauss3).
     min_distance : maxima must be the largest value within this many voxels (Chebyshev).
 
+    Notes
+    -----
     A plateau of equal maximal values (a saturated blob) yields one particle at the
     plateau's intensity-weighted centre, flagged ``saturated``.
     """
@@ -225,9 +229,13 @@ def find_particles(volume, grid, *, threshold: float | None = None, threshold_re
 class MatchResult:
     """One-to-one matching of found particles to the truth.
 
+    Attributes
+    ----------
     pairs : (K, 2) indices (found, truth) into the arrays given to :func:`match`.
     errors_mm : (K, 3) found - truth in (x, y, z).
     n_found, n_truth : particles considered (truth restricted to the grid when one is given).
+    found_mm : (n_found, 3) the found positions [mm] (ghosts included), or None (matches
+        saved before mitpiv kept them).
     """
 
     pairs: np.ndarray
@@ -237,6 +245,7 @@ class MatchResult:
     radius_mm: float
     voxel_mm: tuple | None = None
     truth_index: np.ndarray = field(default=None, repr=False)
+    found_mm: np.ndarray = field(default=None, repr=False)
 
     @property
     def n_matched(self) -> int:
@@ -375,11 +384,16 @@ def assign(a, b, radius: float) -> np.ndarray:
 def match(found, truth, *, radius_mm: float | None = None, grid=None, radius_voxels: float = 2.0) -> MatchResult:
     """Match found particles to the truth one-to-one within a search radius.
 
-    found : :class:`FoundParticles` or (N, 3) positions [mm]; truth : (M, 3) [mm].
+    Parameters
+    ----------
+    found : :class:`FoundParticles` or (N, 3) positions [mm]
+    truth : (M, 3) positions [mm]
     radius_mm : search radius; default ``radius_voxels`` times the largest voxel edge of
         ``grid`` (or of the grid ``found`` came from).
     grid : when given, truth particles outside the grid's bounds are not counted.
 
+    Notes
+    -----
     The assignment minimises the summed distance over the largest set of pairs within
     the radius (see :func:`assign`); the remaining found particles are ghosts.
     """
@@ -400,4 +414,4 @@ def match(found, truth, *, radius_mm: float | None = None, grid=None, radius_vox
     pairs[:, 1] = tidx[pairs[:, 1]]
     err = f[pairs[:, 0]] - t[pairs[:, 1]]
     return MatchResult(pairs, err, f.shape[0], int(tidx.size), float(radius_mm),
-                       tuple(voxel_mm) if voxel_mm is not None else None, tidx)
+                       tuple(voxel_mm) if voxel_mm is not None else None, tidx, f)

@@ -570,6 +570,8 @@ def piv3d(vol_a, vol_b, grid, *, windows=(64, 48, 32), overlap=0.75, deform: boo
           smooth: str | None = "gaussian", chunk_mb: float = 256.0, progress: Progress = None) -> VectorField:
     """Multi-pass 3D cross-correlation PIV between two volumes on ``grid``.
 
+    Parameters
+    ----------
     windows : window edge per pass, a sequence with one entry per pass (``(64, 48, 32)``:
         three passes); each entry is one size for all axes or (w_x, w_y, w_z), so a
         single anisotropic pass is ``[(64, 64, 32)]``. A bare int is one pass. Repeat a
@@ -746,8 +748,8 @@ def uod(field: VectorField, *, threshold: float = 2.0, epsilon: float = 0.1, com
     """Universal outlier detection (Westerweel & Scarano 2005), in 3D.
 
     For each component (in voxels of displacement) with U_i the up to 26 valid neighbours
-    (the centre excluded from both medians): U_m = median U_i, r_m = median |U_i - U_m|,
-    r = |U_0 - U_m| / (r_m + epsilon). ``combine="max"``: a vector is an outlier when
+    (the centre excluded from both medians): ``U_m = median U_i``, ``r_m = median |U_i - U_m|``,
+    ``r = |U_0 - U_m| / (r_m + epsilon)``. ``combine="max"``: a vector is an outlier when
     any component's r exceeds ``threshold``; ``"norm"``: when sqrt(r_u^2 + r_v^2 + r_w^2)
     does. Vectors with fewer than ``min_neighbours`` valid neighbours are not tested.
     Invalid vectors are never outliers but are filled when ``replace`` is given
@@ -920,3 +922,43 @@ def plot_velocity_error(field: VectorField, result: dict, path, *, axis: str = "
     axs[1].set_title(f"outlier ratio {100 * result['outlier_ratio']:.2f} %, n = {result['n']}")
     fig.tight_layout()
     save_figure(fig, path, dpi=110)
+
+
+def curl(vectors, x_mm, y_mm, z_mm) -> np.ndarray:
+    """The curl of a vector field sampled on a lattice.
+
+    Parameters
+    ----------
+    vectors : (n_z, n_y, n_x, 3) array
+        Components along x, y, z (e.g. mm/s); NaN propagates to the neighbours it touches.
+    x_mm, y_mm, z_mm : (n_x,), (n_y,), (n_z,) array
+        Lattice coordinates [mm] (any spacing).
+
+    Returns
+    -------
+    (n_z, n_y, n_x, 3) array
+        (dw/dy - dv/dz, du/dz - dw/dx, dv/dx - du/dy) in the vectors' unit per mm (1/s for
+        mm/s). Derivatives by :func:`numpy.gradient`: second-order central differences
+        inside, second-order one-sided at the edges (first-order where an axis has only
+        two points); zero along an axis with a single point.
+    """
+    a = np.asarray(vectors, dtype=np.float64)
+    coords = [np.asarray(c, dtype=np.float64).ravel() for c in (z_mm, y_mm, x_mm)]
+    if a.ndim != 4 or a.shape[-1] != 3 or a.shape[:3] != tuple(c.size for c in coords):
+        raise ConfigError(f"curl: 'vectors' must have shape (n_z, n_y, n_x, 3) = "
+                          f"{tuple(c.size for c in coords) + (3,)}, got {a.shape}.")
+
+    def d(comp, axis):  # d(component)/d(axis), axis 0 = z, 1 = y, 2 = x
+        n = coords[axis].size
+        if n < 2:
+            return np.zeros(a.shape[:3])
+        return np.gradient(a[..., comp], coords[axis], axis=axis, edge_order=2 if n > 2 else 1)
+
+    u, v, w, x, y, z = 0, 1, 2, 2, 1, 0
+    return np.stack([d(w, y) - d(v, z), d(u, z) - d(w, x), d(v, x) - d(u, y)], axis=-1)
+
+
+def vorticity(field: VectorField) -> np.ndarray:
+    """The vorticity of a measured field, :func:`curl` of (u, v, w) on its window centres:
+    (n_z, n_y, n_x, 3) in 1/s for velocities in mm/s (per mm of displacement otherwise)."""
+    return curl(np.stack([field.u, field.v, field.w], axis=-1), field.x_mm, field.y_mm, field.z_mm)

@@ -151,7 +151,9 @@ def _snr(volume, axis: int) -> float:
 
 
 def plane_snr(volume, *, axis: int = 0, reference=None) -> float:
-    """Per-plane signal-to-noise ratio of a reconstruction, averaged over planes (eq. 4.3)::
+    """Per-plane signal-to-noise ratio of a reconstruction, averaged over planes (eq. 4.3).
+
+    The ratio is::
 
         SNR(V_R) = 1/N sum_j max(I_j) / (mu(I_j) + sigma(I_j))
 
@@ -166,9 +168,10 @@ def plane_snr(volume, *, axis: int = 0, reference=None) -> float:
 
     Returns
     -------
-    float: mean over planes of ``max / (mu + sigma)``, ``mu`` and ``sigma`` the mean and
-    standard deviation of the plane's normal fit (a plane with ``mu + sigma = 0``, all
-    zero, contributes 0); or the ratio to the reference.
+    float
+        Mean over planes of ``max / (mu + sigma)``, ``mu`` and ``sigma`` the mean and
+        standard deviation of the plane's normal fit (a plane with ``mu + sigma = 0``, all
+        zero, contributes 0); or the ratio to the reference.
     """
     s = _snr(volume, axis)
     if reference is None:

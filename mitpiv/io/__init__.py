@@ -1,6 +1,7 @@
 """File formats: EXR images with JSON metadata, particle PLY files, the truth format, volumes,
 light fields, vector fields, particle matches, backlit dewarps and detections, run records
-(JSON), figures; every writer is atomic (a temporary file in the same folder renamed over
+(JSON), figures, ParaView / VTK files (:mod:`mitpiv.io.vtk`), and a user's own data in:
+OpenCV camera calibrations (:mod:`mitpiv.io.opencv`) and particle lists (CSV); every writer is atomic (a temporary file in the same folder renamed over
 the target). Cameras are rebuilt from image metadata by :func:`camera_from_metadata`.
 
 io sits below the packages whose objects it stores: its readers return plain records
@@ -13,7 +14,8 @@ from mitpiv.io.camera import camera_from_metadata
 from mitpiv.io.exr import read_exr, write_exr
 from mitpiv.io.figures import save_figure
 from mitpiv.io.lightfield import read_lightfield, write_lightfield
-from mitpiv.io.particles import read_particles_ply, read_truth, write_particles_ply, write_truth
+from mitpiv.io.opencv import read_opencv_camera, write_opencv_camera
+from mitpiv.io.particles import read_particles_csv, read_particles_ply, read_truth, write_particles_ply, write_truth
 from mitpiv.io.records import read_json, to_jsonable, write_json, write_text
 from mitpiv.io.vectors import read_vector_field, write_vector_field
 from mitpiv.io.volume import read_volume, write_volume
@@ -21,4 +23,5 @@ from mitpiv.io.volume import read_volume, write_volume
 __all__ = ["read_exr", "write_exr", "write_particles_ply", "read_particles_ply", "write_truth", "read_truth",
            "read_volume", "write_volume", "camera_from_metadata", "write_npz", "read_npz", "write_dewarp",
            "read_dewarp", "write_detections", "read_detections", "write_lightfield", "read_lightfield", "write_json",
-           "read_json", "write_text", "to_jsonable", "write_vector_field", "read_vector_field", "save_figure"]
+           "read_json", "write_text", "to_jsonable", "write_vector_field", "read_vector_field", "save_figure",
+           "read_particles_csv", "read_opencv_camera", "write_opencv_camera"]

@@ -24,7 +24,7 @@ from mitpiv.io.arrays import json_entry, read_npz, write_npz
 from mitpiv.io.atomic import atomic_path
 from mitpiv.io.records import to_jsonable
 
-__all__ = ["write_particles_ply", "read_particles_ply", "write_truth", "read_truth", "PLY_FIELDS"]
+__all__ = ["write_particles_ply", "read_particles_ply", "write_truth", "read_truth", "read_particles_csv", "PLY_FIELDS"]
 
 PLY_FIELDS = ("x", "y", "z", "nx", "ny", "nz", "diameter", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
 
@@ -221,3 +221,70 @@ def read_truth(path) -> dict:
             "displacements_mm": z["displacements_mm"] if "displacements_mm" in z else np.diff(pos, axis=0),
             "velocities_mm_s": z.get("velocities_mm_s"),
             "flow": json_entry(z, "flow", path, default={}), "extra": json_entry(z, "extra", path, default={})}
+
+
+#: Column names :func:`read_particles_csv` accepts (first found, case-insensitive).
+CSV_COLUMNS = {"x": ("x_mm", "x", "x0_mm"), "y": ("y_mm", "y", "y0_mm"), "z": ("z_mm", "z", "z0_mm"),
+               "d": ("diameter_um", "d_um", "diameter", "dp_um")}
+
+
+def read_particles_csv(path, *, diameter_um: float | None = None, length_unit_mm: float = 1.0) -> dict:
+    """Read a user's particle list from CSV: one particle per row, a header naming the columns.
+
+    Parameters
+    ----------
+    path : str or Path
+        CSV file (comma-separated, ``#`` comments allowed). Columns (case-insensitive, any
+        order, others ignored): ``x_mm, y_mm, z_mm`` (or ``x, y, z``; also the frame-0
+        columns ``x0_mm, ...`` of :func:`write_truth`'s CSV) and optionally
+        ``diameter_um`` (or ``d_um``, ``diameter``) [um].
+    diameter_um : float, optional
+        Diameter of every particle when the file has no diameter column [um].
+    length_unit_mm : float
+        Millimetres per unit of the position columns (1000 for positions in metres).
+
+    Returns
+    -------
+    dict
+        ``positions_mm`` (N, 3) and ``diameters_um`` (N,), float64.
+
+    Raises
+    ------
+    FileFormatError
+        Missing file, no position columns, non-numeric or non-finite values.
+    ConfigError
+        No diameter column and no ``diameter_um``, or diameters <= 0.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileFormatError(f"read_particles_csv: {str(path)!r} does not exist.")
+    lines = [ln for ln in path.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    if not lines:
+        raise FileFormatError(f"read_particles_csv: {str(path)!r} is empty.")
+    header = [h.strip().lower() for h in next(csv.reader([lines[0]]))]
+    cols = {}
+    for key, names in CSV_COLUMNS.items():
+        cols[key] = next((header.index(n) for n in names if n in header), None)
+    if any(cols[k] is None for k in "xyz"):
+        raise FileFormatError(f"read_particles_csv: {str(path)!r} needs position columns x_mm, y_mm, z_mm (or x, y, "
+                              f"z); its header is {header}.")
+    try:
+        data = np.loadtxt(lines[1:], delimiter=",", ndmin=2, dtype=np.float64,
+                          usecols=[cols[k] for k in "xyzd" if cols[k] is not None])
+    except ValueError as e:
+        raise FileFormatError(f"read_particles_csv: {str(path)!r} has a non-numeric value ({e}).") from None
+    if data.size == 0:
+        data = np.zeros((0, 3 + (cols["d"] is not None)))
+    if not np.all(np.isfinite(data)):
+        raise FileFormatError(f"read_particles_csv: {str(path)!r} holds NaN or infinite values.")
+    pos = data[:, :3] * float(length_unit_mm)
+    if cols["d"] is not None:
+        diam = data[:, 3]
+    elif diameter_um is not None:
+        diam = np.full(pos.shape[0], float(diameter_um))
+    else:
+        raise ConfigError(f"read_particles_csv: {str(path)!r} has no diameter column (diameter_um); give "
+                          "diameter_um=... for all particles.")
+    if pos.shape[0] and not np.all(diam > 0):
+        raise ConfigError(f"read_particles_csv: {str(path)!r}: diameters must be > 0 um, got min {diam.min():g}.")
+    return {"positions_mm": pos, "diameters_um": diam}

@@ -21,7 +21,7 @@ lazy import). It reproduces Wiscombe's MIEV0 test cases, and in our tests it agr
 scattnlay (an independent implementation) and closed forms over x = 1e-4 ... 1e4 (see
 ``tests/physics/test_mie.py``). Two measured limits are enforced rather than returned as
 garbage: ``|m - 1| < 1e-6`` (miepython returns exactly 0 below 1e-8 and loses relative
-accuracy as |m - 1| shrinks) and ``x > 2e4`` (beyond the validated range).
+accuracy as ``|m - 1|`` shrinks) and ``x > 2e4`` (beyond the validated range).
 
 Polydisperse seeding: pass a :class:`SizeDistribution` (e.g. :func:`lognormal`) instead of
 a diameter; averages are number-weighted, the phase function weighted by C_sca.

@@ -137,9 +137,190 @@ def _velocity_error(run: Path):
     return draw
 
 
+# ------------------------------------------------------------------------- flow figures
+def _extent(c):
+    """imshow extent of cell-centred samples at coordinates ``c`` (one sample: +-0.5)."""
+    c = np.asarray(c, dtype=float)
+    h = 0.5 * (c[1] - c[0]) if c.size > 1 else 0.5
+    return c[0] - h, c[-1] + h
+
+
+def _flow_data(run: Path):
+    from mitpiv.analysis import VectorField, curl
+    from mitpiv.io.vectors import read_velocity_error
+
+    field = VectorField.load(run / "piv" / "field.npz")
+    err = read_velocity_error(run / "piv" / "velocity_error.npz")
+    meas = np.stack([field.u, field.v, field.w], axis=-1)
+    ref = np.asarray(err["reference"], dtype=float)
+    return field, meas, ref, np.asarray(err["error"], dtype=float), curl(meas, field.x_mm, field.y_mm, field.z_mm), \
+        curl(ref, field.x_mm, field.y_mm, field.z_mm)
+
+
+def _flow_slice(run: Path):
+    """Middle z slice of the PIV field: measured and true in-plane vectors over the
+    out-of-plane vorticity (or the speed, where the true flow has none), and the error
+    magnitude, on one colour scale per quantity."""
+    def draw(path):
+        plt = _plt()
+        field, meas, ref, err, om, om_t = _flow_data(run)
+        k = field.shape[0] // 2
+        x, y, u = field.x_mm, field.y_mm, field.units
+        ext = (*_extent(x), *_extent(y))
+        speed_t = np.linalg.norm(ref[k], axis=-1)
+        size = max(np.ptp(x), np.ptp(y), 1e-9)
+        rotational = np.nanmax(np.abs(om_t[k, ..., 2])) > 0.05 * np.nanmax(speed_t) / size
+        if rotational:
+            bg = (om[k, ..., 2], om_t[k, ..., 2])
+            lim = float(np.nanmax(np.abs(om_t[k, ..., 2])))
+            kw = {"cmap": "RdBu_r", "vmin": -lim, "vmax": lim}
+            label = "vorticity $\\omega_z$ [1/s]" if u == "mm/s" else "$\\omega_z$ [1/frame]"
+        else:
+            bg = (np.linalg.norm(meas[k], axis=-1), speed_t)
+            kw = {"cmap": "viridis", "vmin": 0.0, "vmax": float(np.nanmax(speed_t)) or None}
+            label = f"speed |u| [{u}]"
+        step = max(1, int(np.ceil(max(x.size, y.size) / 20)))  # at most ~20 arrows per axis
+        yy, xx = np.meshgrid(y[::step], x[::step], indexing="ij")
+        scale = float(np.nanmax(speed_t)) or 1.0
+        arrow = 1.2 * step * (x[1] - x[0] if x.size > 1 else size)  # the longest arrow spans ~1.2 arrow spacings
+        # fixed axes (constrained layout would double the drawing time)
+        fig = plt.figure(figsize=(14.5, 4.6))
+        axs = [fig.add_axes((x0, 0.12, 0.25, 0.76)) for x0 in (0.04, 0.295, 0.685)]
+        cax = [fig.add_axes((x0, 0.17, 0.009, 0.66)) for x0 in (0.555, 0.945)]
+        for ax, b, vec, title in ((axs[0], bg[0], meas, "measured"), (axs[1], bg[1], ref, "true (window average)")):
+            im = ax.imshow(b, origin="lower", extent=ext, interpolation="nearest", **kw)
+            q = vec[k, ::step, ::step]
+            ax.quiver(xx, yy, q[..., 0], q[..., 1], angles="xy", scale_units="xy", scale=scale / arrow,
+                      width=0.004, color="k")
+            ax.set_title(f"{title}, z = {field.z_mm[k]:+.2f} mm", fontsize=10)
+        fig.colorbar(im, cax=cax[0], label=label)
+        e = np.linalg.norm(err[k], axis=-1)
+        im = axs[2].imshow(e, origin="lower", extent=ext, cmap="magma", interpolation="nearest",
+                           vmin=0, vmax=float(np.nanpercentile(e, 99)) if np.isfinite(e).any() else None)
+        out = field.outlier[k]
+        if out.any():
+            yo, xo = np.meshgrid(y, x, indexing="ij")
+            axs[2].plot(xo[out], yo[out], "o", mfc="none", mec="c", ms=7, label="outlier")
+            axs[2].legend(fontsize=8, loc="upper right")
+        axs[2].set_title("|measured - true|", fontsize=10)
+        fig.colorbar(im, cax=cax[1], label=f"error magnitude [{u}]")
+        for ax in axs:
+            ax.set_xlabel("x [mm]")
+        axs[0].set_ylabel("y [mm]")
+        axs[2].set_ylabel("y [mm]")
+        axs[1].tick_params(labelleft=False)
+        fig.suptitle(f"3D PIV, in-plane vectors (u, v) on the middle z plane; arrows: {u}, one scale", fontsize=10)
+        save_figure(fig, path, dpi=100)
+
+    return draw
+
+
+def _velocity_profiles(run: Path):
+    """u, v, w along the x line through the middle of the PIV field: measured (markers,
+    outliers ringed), true averaged over each window and true at the point (the flow at
+    mid-interval), so the spatial filtering of the windows shows."""
+    def draw(path):
+        from mitpiv.io import read_truth
+        from mitpiv.physics.flows import flow_from_dict
+
+        plt = _plt()
+        field, meas, ref, _, _, _ = _flow_data(run)
+        k, j = field.shape[0] // 2, field.shape[1] // 2
+        x = field.x_mm
+        truth = read_truth(run / "particles" / "truth.npz")
+        t0, t1 = (float(t) for t in truth["times_s"][:2])
+        xf = np.linspace(x[0], x[-1], 200)
+        line = np.column_stack([xf, np.full_like(xf, field.y_mm[j]), np.full_like(xf, field.z_mm[k])])
+        point = flow_from_dict(dict(truth["flow"]))(line, 0.5 * (t0 + t1))
+        if field.dt_s is None:
+            point = point * (t1 - t0)
+        fig, axs = plt.subplots(1, 3, figsize=(13, 3.8))
+        fig.subplots_adjust(left=0.06, right=0.99, bottom=0.15, top=0.88, wspace=0.3)
+        out = field.outlier[k, j]
+        for c, ax in enumerate(axs):
+            ax.plot(xf, point[:, c], "-", color="0.6", lw=1.2, label="true at the point")
+            ax.plot(x, ref[k, j, :, c], "k--", lw=1, label="true, window average")
+            ax.plot(x, meas[k, j, :, c], "o", color="C0", ms=5, label="measured")
+            if out.any():
+                ax.plot(x[out], meas[k, j, out, c], "o", mfc="none", mec="r", ms=10, label="outlier")
+            ax.set_xlabel("x [mm]")
+            ax.set_ylabel(f"{'uvw'[c]} [{field.units}]")
+            ax.grid(True, alpha=0.3)
+        axs[0].legend(fontsize=8)
+        fig.suptitle(f"velocity along x at y = {field.y_mm[j]:+.2f} mm, z = {field.z_mm[k]:+.2f} mm "
+                     f"(window {field.window_vox[0]}x{field.window_vox[1]}x{field.window_vox[2]} voxels)", fontsize=10)
+        save_figure(fig, path, dpi=100)
+
+    return draw
+
+
+#: Most particles drawn in a 3D scatter (every k-th beyond it): more hide one another.
+MAX_3D_POINTS = 3000
+
+
+def _particles_3d(run: Path, cfg, frame: int = 0):
+    """Detected particles in 3D coloured by their position error, ghosts and missed true
+    particles marked; beside it the x-z side view (the depth axis), same colours."""
+    def draw(path):
+        from mitpiv.analysis import MatchResult
+        from mitpiv.io import read_truth
+        from mitpiv.studies.export import found_positions, particle_errors
+
+        plt = _plt()
+        m = MatchResult.load(run / "evaluate" / f"matches_{frame}.npz")
+        truth = read_truth(run / "particles" / "truth.npz")["positions_mm"][frame]
+        found = found_positions(run, {"particles": cfg.particles.model_dump()}, frame, m)
+        pe = particle_errors(found, truth, m)
+        vox = float(max(m.voxel_mm)) if m.voxel_mm is not None else 1.0
+        unit = f"voxels of {vox:g} mm" if m.voxel_mm is not None else "mm"
+        err = np.linalg.norm(pe["found_error_mm"], axis=1) / vox
+        ok, ghost = pe["found_match"], ~pe["found_match"]
+        missed = ~pe["true_match"]
+        if m.truth_index is not None:  # true particles outside the reconstructed volume are not "missed"
+            inside = np.zeros(len(truth), bool)
+            inside[m.truth_index] = True
+            missed &= inside
+
+        def thin(idx):
+            idx = np.flatnonzero(idx)
+            return idx[:: max(1, int(np.ceil(idx.size / MAX_3D_POINTS)))]
+
+        fig = plt.figure(figsize=(13, 5.4))
+        a3 = fig.add_axes((0.0, 0.04, 0.5, 0.88), projection="3d")
+        a2 = fig.add_axes((0.56, 0.11, 0.33, 0.78))
+        cax = fig.add_axes((0.915, 0.15, 0.013, 0.7))
+        vmax = float(np.percentile(err[ok], 99)) if ok.any() else 1.0
+        for ax, dims in ((a3, (0, 1, 2)), (a2, (0, 2))):
+            i = thin(missed)
+            ax.scatter(*truth[i][:, dims].T, s=3, c="0.75", label=f"missed true ({missed.sum()})")
+            i = thin(ok)
+            sc = ax.scatter(*found[i][:, dims].T, s=6, c=err[i], cmap="viridis", vmin=0, vmax=vmax,
+                            label=f"found, matched ({ok.sum()})")
+            i = thin(ghost)
+            ax.scatter(*found[i][:, dims].T, s=14, c="r", marker="x", lw=0.8, label=f"ghost ({ghost.sum()})")
+        a3.set_xlabel("x [mm]")
+        a3.set_ylabel("y [mm]")
+        a3.set_zlabel("z [mm]")
+        a3.set_box_aspect(np.ptp(np.vstack([truth, found]), axis=0) + 1e-9)
+        a3.view_init(elev=22, azim=-60)
+        a3.legend(fontsize=8, loc="upper left")
+        a2.set_xlabel("x [mm]")
+        a2.set_ylabel("z [mm] (depth)")
+        a2.set_title("side view (x-z)", fontsize=10)
+        fig.colorbar(sc, cax=cax, label=f"|found - true| [{unit}]")
+        fig.suptitle(f"frame {frame}: detected vs true particles, coloured by position error"
+                     f"{' (every ' + str(int(np.ceil(ok.sum() / MAX_3D_POINTS))) + 'th drawn)' if ok.sum() > MAX_3D_POINTS else ''}",
+                     fontsize=10)
+        save_figure(fig, path, dpi=100)
+
+    return draw
+
+
 def tomo_report(cfg, run_dir, results: dict, timings: dict) -> Report:
     """The report of a tomo run: sensor images, volume projections and slices, the
-    sub-aperture mosaic of a plenoptic camera, particle and velocity errors, and tables."""
+    sub-aperture mosaic of a plenoptic camera, particle errors and the particles in 3D, the
+    measured flow (a slice of measured and true vectors beside the error, profiles of u, v,
+    w), velocity errors, and tables."""
     from mitpiv.studies.kinds.tomo import fmt_metric as f
     from mitpiv.studies.kinds.tomo import grid_of, images, source_of, volume
 
@@ -154,6 +335,9 @@ def tomo_report(cfg, run_dir, results: dict, timings: dict) -> Report:
         figures["subaperture_mosaic.png"] = _mosaic(plen[0])
     figures["particle_errors_0.png"] = _particle_errors(run, 0)
     figures["particle_errors_1.png"] = _particle_errors(run, 1)
+    figures["particles_3d.png"] = _particles_3d(run, cfg, 0)
+    figures["flow_slice.png"] = _flow_slice(run)
+    figures["velocity_profiles.png"] = _velocity_profiles(run)
     figures["velocity_error.png"] = _velocity_error(run)
     ev, pv = results["evaluate"], results["piv"]
     lines = [f"# {cfg.name}", "", f"Scene `{Path(cfg.scene.xml).name}`, seed {cfg.seed}, "
@@ -255,7 +439,13 @@ def backlit_report(cfg, run_dir, results: dict, timings: dict) -> Report:
 # ---------------------------------------------------------------------------- sweeps
 def plot_sweep(table, x: str, y: str, path, *, group: str | None = None) -> None:
     """PNG of metric ``y`` against parameter ``x`` (names as in the table, "param." optional),
-    one line per value of ``group``."""
+    one line per value of ``group``.
+
+    Points that share ``x`` (and ``group``) and differ only in ``seed`` (a sweep over
+    ``seed``) are drawn as their mean with error bars of one standard deviation (ddof 1),
+    the number of seeds in the legend; points that differ in another parameter are drawn
+    one by one.
+    """
     import pandas as pd
 
     from mitpiv.errors import ConfigError
@@ -274,19 +464,32 @@ def plot_sweep(table, x: str, y: str, path, *, group: str | None = None) -> None
     cats = list(dict.fromkeys(df[cx]))  # a categorical x (e.g. labels) keeps the study's order
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
     groups = [(None, df)] if group is None else list(df.groupby(col(group), sort=False))
+    keys = [cx] + ([col(group)] if group is not None else [])
+    others = [c for c in df.columns if c.startswith("param.") and c not in keys and c != "param.seed"]
+    seeds_only = all(df.groupby(keys, sort=False)[c].nunique(dropna=False).max() <= 1 for c in others)
+    repeats = 1
     for g, sub in groups:
         lab = None if g is None else f"{group} = {g}"
-        if numeric:
-            sub = sub.sort_values(cx)
-            ax.plot(sub[cx], sub[cy], "o-", label=lab)
+        if seeds_only:
+            st = sub.groupby(cx, sort=False)[cy].agg(["mean", "std", "count"]).reset_index()
         else:
-            ax.plot([cats.index(v) for v in sub[cx]], sub[cy], "o", ms=7, label=lab)
+            st = pd.DataFrame({cx: sub[cx], "mean": sub[cy], "std": np.nan, "count": 1})
+        if numeric:
+            st = st.sort_values(cx)
+        xs = st[cx] if numeric else [cats.index(v) for v in st[cx]]
+        n = int(st["count"].max())
+        repeats = max(repeats, n)
+        if n > 1:
+            ax.errorbar(xs, st["mean"], yerr=st["std"].fillna(0.0), fmt="o-" if numeric else "o", ms=6, capsize=3,
+                        label=(lab + ", " if lab else "") + f"mean $\\pm$ 1 s.d. over {n} seeds")
+        else:
+            ax.plot(xs, st["mean"], "o-" if numeric else "o", ms=6 if numeric else 7, label=lab)
     if not numeric:
         ax.set_xticks(range(len(cats)), [str(c) for c in cats], rotation=30, ha="right", fontsize=8)
         ax.grid(True, axis="y", alpha=0.3)
     ax.set_xlabel(x)
     ax.set_ylabel(y)
-    if group is not None:
+    if group is not None or repeats > 1:
         ax.legend(fontsize=8)
     fig.tight_layout()
     save_figure(fig, path, dpi=110)

@@ -149,12 +149,17 @@ def _write_table(rows, out: Path):
 
 
 def run_sweep(path, out_dir, scheduler=None, *, workers: int | None = None, full: bool = False,
-              progress: Progress = None):
+              processes: bool = True, progress: Progress = None):
     """Run every point of the study in ``path`` on Dask; returns the results table (pandas).
 
+    Parameters
+    ----------
     scheduler : None: a LocalCluster of ``workers`` single-threaded processes (default: the
         study's ``workers`` or 2); else the address of a running Dask scheduler.
     full : apply the study's [full] overrides (the full-size study) to every point.
+    processes : the local cluster's workers are processes (default); False: threads of this
+        process (no worker start-up, and they reuse this process's compiled kernels; small
+        studies and tests).
     """
     from dask.distributed import Client, LocalCluster, as_completed
 
@@ -188,7 +193,8 @@ def run_sweep(path, out_dir, scheduler=None, *, workers: int | None = None, full
         if todo:
             if scheduler is None:
                 n = int(workers or st.get("workers") or 2)
-                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=processes,
+                                       dashboard_address=None)
                 client = Client(cluster)
             else:
                 client = Client(scheduler)

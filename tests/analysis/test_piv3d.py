@@ -250,3 +250,18 @@ def test_bad_volumes():
         piv3d(VOL_A, v, GRID)
     with pytest.raises(ConfigError, match="vol_a"):
         piv3d(VOL_A[:10], VOL_A, GRID)
+
+
+def test_curl_of_a_quadratic_field_is_exact():
+    """np.gradient's second-order differences (one-sided at the edges) are exact for
+    quadratics: curl of u = (y z^2 - x y, x^2 + 3 z, x y z) on an uneven lattice against the
+    curl written out by hand."""
+    from mitpiv.analysis import curl
+
+    x, y, z = np.array([-1.0, 0.0, 0.5, 2.0]), np.linspace(-1, 1, 5), np.array([0.0, 0.3, 1.0])
+    zz, yy, xx = np.meshgrid(z, y, x, indexing="ij")
+    u = np.stack([yy * zz**2 - xx * yy, xx**2 + 3 * zz, xx * yy], axis=-1)   # w = x y (degree 2)
+    want = np.stack([xx - 3.0, 2 * yy * zz - yy, 2 * xx - zz**2 + xx], axis=-1)
+    np.testing.assert_allclose(curl(u, x, y, z), want, atol=1e-12)
+    with pytest.raises(ConfigError, match="n_z, n_y, n_x, 3"):
+        curl(u[..., :2], x, y, z)

@@ -20,6 +20,16 @@
      - Alternative to ``to_world``: place the camera around ``target`` with
        :func:`mitpiv.physics.camera.place_camera` (angles in the laser-sheet frame given
        by ``laser_direction`` (1,0,0) and ``sheet_normal`` (0,0,1)).
+   * - calibration
+     - string
+     - --
+     - none
+     - A user's OpenCV calibration (``.yml``/``.yaml``/``.xml``/``.json``: camera matrix,
+       distortion, optionally rvec/tvec in mm; :func:`mitpiv.io.read_opencv_camera`)
+       instead of ``focal_length_mm``/``fov``, the principal point and ``k1``..``p2``; its
+       pose is used unless ``to_world`` or a placement is given (then the file must hold
+       none). Relative paths resolve against the scene's folder. The film must have the
+       calibrated size; ``pixel_pitch_um`` comes from the file or the property.
    * - focal_length_mm
      - float
      - mm
@@ -163,6 +173,9 @@ class DistortedPinhole(MitpivSensor):
         w, h = film_resolution(self, "distorted_pinhole")
         self.resolution = (w, h)
 
+        calibration = rd.string("calibration", None)
+        if calibration is not None:
+            return self._init_calibrated(props, rd, calibration, (w, h))
         pitch = check_positive("pixel_pitch_um", rd.float("pixel_pitch_um", 10.0), owner="distorted_pinhole", unit="um")
         fov = rd.float("fov", None)
         focal = rd.float("focal_length_mm", None)
@@ -205,6 +218,42 @@ class DistortedPinhole(MitpivSensor):
         if pct is not None:
             cam.distortion = Distortion(k1=percent_to_k1(pct, r_max=cam.corner_radius), k2=dist.k2, k3=dist.k3, p1=dist.p1, p2=dist.p2)
         self.distortion_percent = pct
+        self._finish_init(cam, to_world, focus_normal, psf_props, film)
+
+    def _init_calibrated(self, props, rd, calibration: str, size) -> None:
+        """The camera of a user's OpenCV calibration file (the ``calibration`` property)."""
+        from mitpiv.io.opencv import read_opencv_camera
+
+        clash = [k for k in ("focal_length_mm", "fov", "principal_point_x_px", "principal_point_y_px", "k1", "k2", "k3",
+                             "p1", "p2", "distortion_percent") if rd.has(k)]
+        if clash:
+            raise ConfigError(f"distorted_pinhole: 'calibration' gives the intrinsics and distortion; remove {clash}.")
+        pitch = rd.float("pixel_pitch_um", None)
+        placed = read_placement(rd, props)
+        if placed is not None:
+            self.m_to_world = mi.Transform4f(placed)
+        xml_pose = placed is not None or "to_world" in props
+        f_number = rd.float("f_number", None)
+        focus = rd.float("focus_distance_mm", None)
+        focus_normal = rd.vector("focus_plane_normal", None)
+        self.near_clip = check_positive("near_clip", rd.float("near_clip", 0.01), owner="distorted_pinhole", unit="mm")
+        self.far_clip = check_positive("far_clip", rd.float("far_clip", 1e7), owner="distorted_pinhole", unit="mm")
+        path = str(mi.file_resolver().resolve(calibration))
+        cam = read_opencv_camera(path, pixel_pitch_um=pitch, resolution=size, f_number=f_number,
+                                 focus_distance_mm=focus, pose="forbid" if xml_pose else "optional")
+        if not xml_pose:
+            self.m_to_world = mi.Transform4f(cam.to_world_mitsuba())
+        to_world = np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4)
+        cam.rotation, cam.position_mm = PinholeCamera.rotation_from_mitsuba(to_world)
+        psf_props = _read_psf_props(rd, f_number, focus, cam.focal_length_mm, cam.pixel_pitch_um)
+        rd.finish()
+        self.distortion_percent = None
+        self.calibration_file = path
+        self._finish_init(cam, to_world, focus_normal, psf_props, self.film())
+
+    def _finish_init(self, cam, to_world, focus_normal, psf_props, film) -> None:
+        w, h = cam.resolution
+        position = cam.position_mm
         # Folding check and Newton iteration count (float64, over the whole image).
         self.newton_iterations = cam.validate_distortion()
         self.camera = cam

@@ -18,11 +18,13 @@ default and range)::
     [reconstruction]   method, bounds_mm, voxel_mm, iterations, ...
     [piv]              windows, overlap, deform, interpolation, ...
     [particles]        method, threshold_rel, radius_voxels
+    [output]           vtk = true: ParaView files in RUN/vtk (mitpiv.studies.export)
 
 Stages: ``particles`` (seeding, advection, PLY files, truth), ``render`` (EXR per camera
 and frame), ``sensor`` (counts; only with a [sensor] table), ``reconstruct`` (volume per
 frame), ``evaluate`` (particles and quality per frame), ``piv`` (vector field and its error
-against the flow), ``report`` (report.md and figures, :mod:`mitpiv.studies.report`).
+against the flow), ``report`` (report.md and figures, :mod:`mitpiv.studies.report`), ``vtk``
+(only with ``[output] vtk = true``: :func:`mitpiv.studies.export.export_vtk`).
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from mitpiv.studies.runner import RENDER_PACKAGES, Kind, Stage, StageContext
 from mitpiv.studies.schema import Table, Vec3, discriminated, model_from_signature
 
 FRAMES = (0, 1)
-STAGES = ("particles", "render", "sensor", "reconstruct", "evaluate", "piv", "report")
+STAGES = ("particles", "render", "sensor", "reconstruct", "evaluate", "piv", "report", "vtk")
 
 PosFloat = Annotated[float, Field(gt=0)]
 
@@ -76,10 +78,16 @@ class SceneTable(Table):
 
 
 class SeedingTable(Table):
-    """Particles seeded uniformly in a box (mitpiv.physics.seeding.seed_box)."""
+    """Particles seeded uniformly in a box (mitpiv.physics.seeding.seed_box), or the user's
+    own particle list (``file``)."""
 
-    box_min_mm: Vec3 = Field(..., description="lower corner of the seeding box [mm]")
-    box_max_mm: Vec3 = Field(..., description="upper corner of the seeding box [mm]")
+    box_min_mm: Vec3 | None = Field(None, description="lower corner of the seeding box [mm] (required unless file)")
+    box_max_mm: Vec3 | None = Field(None, description="upper corner of the seeding box [mm] (required unless file)")
+    file: str | None = Field(None, description="the user's particle list instead of random seeding: CSV with x_mm, "
+                                               "y_mm, z_mm[, diameter_um] (mitpiv.io.read_particles_csv), relative "
+                                               "to the experiment file")
+    file_sha256: str | None = Field(None, description="set by mitpiv: the file's content hash (a changed file "
+                                                      "reruns the particles stage)")
     count: Annotated[int, Field(ge=0)] | None = Field(None, description="number of particles")
     concentration_per_mm3: PosFloat | None = Field(None, description="particles per mm^3")
     ppp: PosFloat | None = Field(None, description="particles per pixel of the density sensor")
@@ -97,6 +105,12 @@ class SeedingTable(Table):
     def _one_density(self):
         given = [k for k in ("count", "concentration_per_mm3") if getattr(self, k) is not None]
         dens = [k for k in ("ppp", "particles_per_microlens") if getattr(self, k) is not None]
+        if self.file is not None:
+            if given or dens:
+                raise ValueError(f"file gives the particles; remove {given + dens}")
+            return self
+        if self.box_min_mm is None or self.box_max_mm is None:
+            raise ValueError("box_min_mm and box_max_mm are required (or file = a particle list)")
         if len(given) + (1 if dens else 0) != 1:
             raise ValueError("give exactly one of count, concentration_per_mm3, ppp or particles_per_microlens "
                              "(ppp and particles_per_microlens may go together: the density sensor's kind picks); "
@@ -233,6 +247,13 @@ class _Experiment(Table):
         return self
 
 
+class OutputTable(Table):
+    """Extra files a run writes beside its report."""
+
+    vtk: bool = Field(False, description="ParaView / VTK files of volumes, PIV field, particles and tracks in "
+                                         "RUN/vtk (mitpiv.studies.export)")
+
+
 @cache
 def schema():
     """The tomo experiment model (built once: the flow and sensor tables come from the physics)."""
@@ -251,6 +272,7 @@ def schema():
         "reconstruction": (ReconstructionTable, Field(..., description="volume reconstruction")),
         "piv": (PivTable, Field(default_factory=PivTable, description="3D PIV")),
         "particles": (ParticlesTable, Field(default_factory=ParticlesTable, description="particle evaluation")),
+        "output": (OutputTable, Field(default_factory=OutputTable, description="extra output files")),
     }
     model = create_model("TomoExperiment", __base__=_Experiment,
                          __doc__="A particle-image experiment: seeding, flow, render, reconstruction, "
@@ -259,13 +281,22 @@ def schema():
 
 
 def prepare(raw: dict, base_dir: Path) -> dict:
-    """Resolve the scene XML against the experiment's folder (before validation)."""
+    """Resolve the scene XML and a particle list against the experiment's folder (before
+    validation); the particle list's content hash joins the seeding table."""
     scene = raw.get("scene")
     if isinstance(scene, dict) and isinstance(scene.get("xml"), str):
         xml = (base_dir / scene["xml"]).resolve()
         if not xml.is_file():
             raise ConfigError(f"experiment: [scene] xml = {scene['xml']!r} does not exist (resolved to {xml}).")
         raw = {**raw, "scene": {**scene, "xml": str(xml)}}
+    seeding = raw.get("seeding")
+    if isinstance(seeding, dict) and isinstance(seeding.get("file"), str):
+        import hashlib
+
+        f = (base_dir / seeding["file"]).resolve()
+        if not f.is_file():
+            raise ConfigError(f"experiment: [seeding] file = {seeding['file']!r} does not exist (resolved to {f}).")
+        raw = {**raw, "seeding": {**seeding, "file": str(f), "file_sha256": hashlib.sha256(f.read_bytes()).hexdigest()}}
     if raw.get("kind") == "particles":
         raw = {**raw, "kind": "tomo"}
     return raw
@@ -281,7 +312,7 @@ def grid_of(cfg):
 
 def _seeding_kwargs(s) -> dict:
     kw = s.model_dump(exclude={"box_min_mm", "box_max_mm", "proxy_radius_mm", "density_sensor", "ppp",
-                               "particles_per_microlens"}, exclude_none=True)
+                               "particles_per_microlens", "file", "file_sha256"}, exclude_none=True)
     return kw
 
 
@@ -293,19 +324,26 @@ def stage_particles(ctx: StageContext) -> dict:
 
     cfg, out = ctx.cfg, ctx.out
     s = cfg.seeding
-    kw = _seeding_kwargs(s)
-    if s.ppp is not None or s.particles_per_microlens is not None:
-        kw["count"] = count_for_density(cfg, out)
-    particles = seed_box(s.box_min_mm, s.box_max_mm, seed=cfg.seed, **kw)
+    if s.file is not None:  # the user's particle list
+        from mitpiv.io import read_particles_csv
+
+        user = read_particles_csv(s.file, diameter_um=s.diameter_um)
+        p0, diam = user["positions_mm"], user["diameters_um"]
+    else:
+        kw = _seeding_kwargs(s)
+        if s.ppp is not None or s.particles_per_microlens is not None:
+            kw["count"] = count_for_density(cfg, out)
+        particles = seed_box(s.box_min_mm, s.box_max_mm, seed=cfg.seed, **kw)
+        p0, diam = particles.positions_mm, particles.diameters_um
     f = cfg.flow.model_dump()
     dt = float(f.pop("dt_s"))
     flow = flow_from_dict(f)
-    p1 = advect(particles.positions_mm, flow, dt_s=dt, t0_s=0.0, substeps=8)
-    for k, p in enumerate((particles.positions_mm, p1)):
-        write_particles_ply(out / f"particles_{k}.ply", p, particles.diameters_um, proxy_radius_mm=s.proxy_radius_mm)
-    write_truth(out / "truth.npz", positions_mm=[particles.positions_mm, p1], times_s=[0.0, dt],
-                diameters_um=particles.diameters_um, flow=flow.to_dict(), extra={"seed": cfg.seed})
-    return {"n_particles": len(particles)}
+    p1 = advect(p0, flow, dt_s=dt, t0_s=0.0, substeps=8)
+    for k, p in enumerate((p0, p1)):
+        write_particles_ply(out / f"particles_{k}.ply", p, diam, proxy_radius_mm=s.proxy_radius_mm)
+    write_truth(out / "truth.npz", positions_mm=[p0, p1], times_s=[0.0, dt], diameters_um=diam, flow=flow.to_dict(),
+                extra={"seed": cfg.seed})
+    return {"n_particles": len(p0)}
 
 
 def _uses_density(cfg) -> bool:
@@ -599,6 +637,12 @@ def stage_report(ctx: StageContext) -> dict:
     return report.write(report.tomo_report(ctx.cfg, ctx.run_dir, ctx.results, ctx.timings), ctx.out)
 
 
+def stage_vtk(ctx: StageContext) -> dict:
+    from mitpiv.studies.export import export_vtk
+
+    return {"files": [f.name for f in export_vtk(ctx.run_dir, ctx.out, progress=ctx.progress)]}
+
+
 def stages(cfg) -> list[Stage]:
     # the particles stage reads the scene (with Mitsuba) only to turn a density into a count
     dens = _uses_density(cfg)
@@ -611,6 +655,8 @@ def stages(cfg) -> list[Stage]:
             Stage("evaluate", ("particles",), stage_evaluate),
             Stage("piv", ("piv",), stage_piv),
             Stage("report", (), stage_report)]
+    if cfg.output.vtk:
+        out.append(Stage("vtk", ("output",), stage_vtk))
     return out
 
 

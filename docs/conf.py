@@ -1,0 +1,132 @@
+"""Sphinx configuration of the mitpiv documentation (``make docs``: HTML in docs/_build/html,
+warnings are errors).
+
+Pages written in Markdown (MyST); the API reference from the numpydoc docstrings (autodoc +
+numpydoc). Some pages are generated at build time into ``_generated/`` (not kept in git) so
+they cannot drift from the code and the files they show:
+
+- ``schema.md``: the experiment schema of every kind, :func:`mitpiv.studies.schema.describe`
+  (the same text as ``mitpiv schema``);
+- ``examples.md``: every script in ``examples/``, its docstring, its source and its figure
+  (``docs/examples/<script>.png``, made by ``python examples/<script>.py``);
+- ``replications.md`` and ``benchmarks.md``: whatever exists under ``docs/replications/`` and
+  ``docs/benchmarks.md`` (and the accuracy-versus-time report in ``docs/accuracy-time/``).
+"""
+
+import ast
+import os
+import sys
+from pathlib import Path
+
+DOCS = Path(__file__).resolve().parent
+ROOT = DOCS.parent
+sys.path.insert(0, str(ROOT))
+os.environ.setdefault("MITPIV_QUIET", "1")
+
+import mitpiv  # noqa: E402
+
+project = "mitpiv"
+author = "mitpiv contributors"
+release = version = mitpiv.__version__ if hasattr(mitpiv, "__version__") else "0.1.0"
+extensions = ["myst_parser", "sphinx.ext.autodoc", "numpydoc", "sphinx.ext.mathjax"]
+source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
+myst_enable_extensions = ["dollarmath", "colon_fence"]
+myst_heading_anchors = 3
+exclude_patterns = ["_build", "examples/*.md", "replications/**", "accuracy-time/**", "benchmarks.md"]
+html_theme = "alabaster"
+html_title = "mitpiv"
+html_theme_options = {"description": "physically based rendering testbed for volumetric PIV", "page_width": "1100px",
+                      "sidebar_width": "230px"}
+autodoc_member_order = "bysource"
+autodoc_typehints = "none"  # the numpydoc sections carry types and units
+numpydoc_show_class_members = False
+numpydoc_class_members_toctree = False
+numpydoc_validation_checks = set()
+nitpicky = False
+
+
+# ------------------------------------------------------------------ generated pages
+def _write(name: str, text: str) -> None:
+    out = DOCS / "_generated"
+    out.mkdir(exist_ok=True)
+    f = out / name
+    if not f.is_file() or f.read_text() != text:  # unchanged files keep Sphinx's cache
+        f.write_text(text)
+
+
+def _schema_page() -> str:
+    from mitpiv.studies.kinds import KINDS, get_kind
+    from mitpiv.studies.schema import describe
+
+    parts = ["# Experiment schema", "",
+             "Every key of every table of an experiment TOML file, with its unit (in the key's name), "
+             "default and valid range, generated from the schema the runner validates against "
+             "(`mitpiv schema` prints the same; `mitpiv run EXP --check` validates a file). "
+             "`kind = \"...\"` at the top of a file picks the table set.", ""]
+    for name in KINDS:
+        k = get_kind(name)
+        text = describe(k.schema, title=f"Experiment kind `{k.name}`: {k.describe}")
+        # one level down: the kind is a section of this page
+        parts.append("\n".join(("#" + line) if line.startswith("#") else line for line in text.splitlines()))
+    return "\n".join(parts) + "\n"
+
+
+def _examples_page() -> str:
+    parts = ["# Examples", "",
+             "Short scripts to copy from, in `examples/` (each runs in under a minute at its default size; "
+             "`--small` is the quick size the test suite runs). Run them from the repository root, e.g. "
+             "`python examples/tomo_experiment.py`; they write into `out/examples/<name>/`.", ""]
+    for script in sorted((ROOT / "examples").glob("*.py")):
+        if script.name.startswith("_"):
+            continue
+        doc = ast.get_docstring(ast.parse(script.read_text())) or script.stem
+        first, _, rest = doc.partition("\n")
+        parts += [f"## {script.stem.replace('_', ' ')}", "", first.strip(), rest.strip(), ""]
+        fig = DOCS / "examples" / f"{script.stem}.png"
+        if fig.is_file():
+            parts += [f"![{script.stem}](../examples/{fig.name})", ""]
+        parts += ["```{literalinclude} " + f"../../examples/{script.name}", ":language: python", "```", ""]
+    return "\n".join(parts)
+
+
+def _include(path: Path, *, heading_shift: bool = False) -> list[str]:
+    rel = os.path.relpath(path, DOCS / "_generated")
+    opts = [":relative-docs: ..", ":relative-images:"] + ([":heading-offset: 1"] if heading_shift else [])
+    return ["```{include} " + rel, *opts, "```", ""]
+
+
+def _replications_page() -> str:
+    parts = ["# Replication reports", "",
+             "Published results reproduced with mitpiv (`mitpiv replicate NAME`), each against the paper's "
+             "numbers with its tolerance; the reports below are the files under `docs/replications/`.", ""]
+    reports = sorted(f for f in (DOCS / "replications").glob("**/*.md") if "work" not in f.relative_to(DOCS).parts) \
+        if (DOCS / "replications").is_dir() else []
+    if not reports:
+        parts += ["No replication report has been committed yet.", ""]
+    for r in reports:
+        parts += _include(r, heading_shift=True)
+    return "\n".join(parts)
+
+
+def _benchmarks_page() -> str:
+    parts = ["# Benchmarks", "", "Measured wall times and accuracies (`make bench`, `mitpiv bench accuracy-time`).",
+             ""]
+    found = False
+    for f in (DOCS / "benchmarks.md", DOCS / "accuracy-time" / "accuracy_time.md"):
+        if f.is_file():
+            parts += _include(f, heading_shift=True)
+            found = True
+    if not found:
+        parts += ["No benchmark report has been committed yet.", ""]
+    return "\n".join(parts)
+
+
+def _generate(app) -> None:
+    _write("schema.md", _schema_page())
+    _write("examples.md", _examples_page())
+    _write("replications.md", _replications_page())
+    _write("benchmarks.md", _benchmarks_page())
+
+
+def setup(app):
+    app.connect("builder-inited", _generate)

@@ -1,0 +1,213 @@
+"""Export a finished run folder to files other tools open: ParaView / VTK
+(:func:`export_vtk`, the writers of :mod:`mitpiv.io.vtk`).
+
+A tomo run (:mod:`mitpiv.studies.kinds.tomo`) becomes, in ``out_dir`` (default
+``RUN/vtk``):
+
+``volume_<frame>.vti``
+    image data on the reconstruction's voxel grid (point data at voxel centres): arrays
+    ``reconstructed`` and ``true`` (the true intensity volume of the frame's particles,
+    :func:`mitpiv.analysis.truth_volume`).
+``piv.vts``
+    structured grid on the interrogation-window centres: ``velocity_measured``,
+    ``velocity_true`` (the flow averaged over each window, the reference of the run's
+    velocity error), ``velocity_error`` (measured - true; NaN where a vector was not
+    valid), ``velocity_error_magnitude``, ``outlier``, ``replaced``, ``valid`` (0 / 1),
+    ``snr``, ``peak``, ``vorticity`` and ``vorticity_true`` (curl of the measured and true
+    fields, :func:`mitpiv.analysis.curl`). Velocities in mm/s, vorticity in 1/s.
+``particles_true_<frame>.vtu``, ``particles_found_<frame>.vtu``
+    point clouds: ``diameter_um`` (true), ``peak`` (found), ``match`` (1 where the
+    particle has a partner), ``error_mm`` (found - true, NaN without a partner) and
+    ``error_magnitude_mm``; ``truth_index`` (found; -1 for ghosts).
+``tracks_true.vtu``
+    the true path of every particle from frame 0 to frame 1 as a polyline
+    (:func:`~mitpiv.io.vtk.write_tracks`; RK4 in the run's flow), with ``time_s`` and
+    ``velocity_mm_s`` per point.
+``run.pvd``
+    a ParaView collection of all of them at the frame times (open this one).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from mitpiv.errors import ConfigError, FileFormatError
+from mitpiv.progress import Progress, bar
+
+__all__ = ["export_vtk", "found_positions", "particle_errors", "TRACK_SAMPLES"]
+
+log = logging.getLogger(__name__)
+
+#: Points per true track between frame 0 and frame 1 (RK4 positions at equal times).
+TRACK_SAMPLES = 9
+
+
+def _experiment(run: Path) -> dict:
+    from mitpiv.io.records import read_json
+
+    f = run / "experiment.json"
+    if not f.is_file():
+        raise FileFormatError(f"export: {str(run)!r} is not a run folder (no experiment.json); give the --out folder "
+                              "of 'mitpiv run'.")
+    return read_json(f)
+
+
+def _need(run: Path, *names: str) -> None:
+    missing = [n for n in names if not (run / n / "stage.json").is_file()]
+    if missing:
+        raise FileFormatError(f"export: the run {str(run)!r} has not finished the stage(s) {missing}; run "
+                              f"'mitpiv run EXPERIMENT --out {run}' to complete it.")
+
+
+def found_positions(run: Path, exp: dict, frame: int, matches) -> np.ndarray:
+    """The positions of the particles found in frame ``frame`` (ghosts included): kept with
+    the matches, or for runs whose matches predate that, found again in the saved volume
+    with the run's own settings (the same deterministic detection)."""
+    if matches.found_mm is not None:
+        return np.asarray(matches.found_mm, dtype=np.float64)
+    from mitpiv.analysis import find_particles
+    from mitpiv.io import read_volume
+
+    vol, grid, _ = read_volume(run / "reconstruct" / f"volume_{frame}.npz")
+    p = exp.get("particles") or {}
+    found = find_particles(vol, grid, method=p.get("method", "gauss3"), threshold_rel=p.get("threshold_rel", 0.1))
+    if len(found) != matches.n_found:
+        raise FileFormatError(f"export: {len(found)} particles found again in frame {frame}, the run found "
+                              f"{matches.n_found}; rerun the evaluate stage.")
+    return found.positions_mm
+
+
+def particle_errors(found_mm, truth_mm, matches) -> dict:
+    """Per-particle match flags and errors for the found and the true particles.
+
+    Returns a dict with ``found_match`` (n_found,) bool, ``found_error_mm`` (n_found, 3),
+    ``found_truth_index`` (n_found,) int (-1: ghost), ``true_match`` (n_truth_all,) bool and
+    ``true_error_mm`` (n_truth_all, 3); errors are found - true [mm], NaN without a partner.
+    """
+    nf, nt = len(found_mm), len(truth_mm)
+    fi, ti = matches.pairs[:, 0], matches.pairs[:, 1]
+    out = {"found_match": np.zeros(nf, bool), "found_error_mm": np.full((nf, 3), np.nan),
+           "found_truth_index": np.full(nf, -1, np.int64), "true_match": np.zeros(nt, bool),
+           "true_error_mm": np.full((nt, 3), np.nan)}
+    out["found_match"][fi] = True
+    out["true_match"][ti] = True
+    out["found_error_mm"][fi] = matches.errors_mm
+    out["true_error_mm"][ti] = matches.errors_mm
+    out["found_truth_index"][fi] = ti
+    return out
+
+
+def _magnitude(e):
+    return np.sqrt(np.sum(np.asarray(e) ** 2, axis=-1))
+
+
+def export_vtk(run_dir, out_dir=None, *, progress: Progress = None) -> list[Path]:
+    """Write a finished tomo run's volumes, PIV field, particles and true tracks as VTK files
+    for ParaView (see the module notes for the files and their arrays).
+
+    Parameters
+    ----------
+    run_dir : str or Path
+        The run folder of ``mitpiv run`` / :func:`~mitpiv.studies.run_experiment` (its
+        particles, reconstruct, evaluate and piv stages finished).
+    out_dir : str or Path, optional
+        Where the files go (default ``run_dir / "vtk"``).
+    progress : optional
+        Progress bar control (:mod:`mitpiv.progress`).
+
+    Returns
+    -------
+    list of Path
+        The files written, ``run.pvd`` last.
+
+    Raises
+    ------
+    FileFormatError
+        ``run_dir`` is not a run folder or a stage it needs has not finished.
+    ConfigError
+        The run is not a tomo run (backlit runs have no volumes or vector field).
+    """
+    from mitpiv.analysis import MatchResult, VectorField, curl, truth_volume
+    from mitpiv.io import read_truth, read_volume
+    from mitpiv.io import vtk as vt
+    from mitpiv.io.vectors import read_velocity_error
+    from mitpiv.physics.advection import advect
+    from mitpiv.physics.flows import flow_from_dict
+
+    run = Path(run_dir)
+    exp = _experiment(run)
+    if exp.get("kind", "tomo") != "tomo":
+        raise ConfigError(f"export: --vtk exports tomo runs; {str(run)!r} is a {exp.get('kind')!r} run.")
+    _need(run, "particles", "reconstruct", "evaluate", "piv")
+    out = Path(out_dir) if out_dir is not None else run / "vtk"
+    truth = read_truth(run / "particles" / "truth.npz")
+    times = [float(t) for t in truth["times_s"]]
+    files, pvd = [], []
+    with bar(8, desc="vtk export", progress=progress, unit="file") as b:
+        for frame in (0, 1):
+            vol, grid, _ = read_volume(run / "reconstruct" / f"volume_{frame}.npz")
+            p_true = truth["positions_mm"][frame]
+            f = vt.write_image_data(out / f"volume_{frame}.vti", grid,
+                                    {"reconstructed": vol.astype(np.float32),
+                                     "true": truth_volume(p_true, grid).astype(np.float32)})
+            files.append(f)
+            pvd.append((f, times[frame], 0, "volume"))
+            b.update()
+            m = MatchResult.load(run / "evaluate" / f"matches_{frame}.npz")
+            found = found_positions(run, exp, frame, m)
+            pe = particle_errors(found, p_true, m)
+            f_true = vt.write_points(out / f"particles_true_{frame}.vtu", p_true, {
+                "diameter_um": truth["diameters_um"], "match": pe["true_match"], "error_mm": pe["true_error_mm"],
+                "error_magnitude_mm": _magnitude(pe["true_error_mm"])})
+            f_found = vt.write_points(out / f"particles_found_{frame}.vtu", found, {
+                "match": pe["found_match"], "error_mm": pe["found_error_mm"],
+                "error_magnitude_mm": _magnitude(pe["found_error_mm"]), "truth_index": pe["found_truth_index"]})
+            files += [f_true, f_found]
+            pvd += [(f_true, times[frame], 1, "particles_true"), (f_found, times[frame], 2, "particles_found")]
+            b.update(2)
+        field = VectorField.load(run / "piv" / "field.npz")
+        err = read_velocity_error(run / "piv" / "velocity_error.npz")
+        meas = np.stack([field.u, field.v, field.w], axis=-1)
+        ref = np.asarray(err["reference"], dtype=np.float64)
+        e = np.asarray(err["error"], dtype=np.float64)
+        f = vt.write_structured_grid(out / "piv.vts", field.x_mm, field.y_mm, field.z_mm, {
+            "velocity_measured": meas, "velocity_true": ref, "velocity_error": e,
+            "velocity_error_magnitude": _magnitude(e), "outlier": field.outlier, "replaced": field.replaced,
+            "valid": field.valid, "snr": field.snr, "peak": field.peak,
+            "vorticity": curl(meas, field.x_mm, field.y_mm, field.z_mm),
+            "vorticity_true": curl(ref, field.x_mm, field.y_mm, field.z_mm)})
+        files.append(f)
+        b.update()
+        flow = flow_from_dict(dict(truth["flow"]))
+        dt = times[1] - times[0]
+        n = truth["positions_mm"].shape[1]
+        steps = [truth["positions_mm"][0]]
+        ts = times[0] + dt * np.arange(TRACK_SAMPLES) / (TRACK_SAMPLES - 1)
+        for k in range(1, TRACK_SAMPLES):  # a loop over time steps; each step is vectorised over particles
+            steps.append(advect(steps[-1], flow, dt_s=ts[k] - ts[k - 1], t0_s=ts[k - 1], substeps=2))
+        pts = np.stack(steps, axis=1).reshape(-1, 3)  # particle-major: each track's points in time order
+        t_pt = np.tile(ts, n)
+        f_tr = vt.write_tracks(out / "tracks_true.vtu", pts, np.repeat(np.arange(n), TRACK_SAMPLES),
+                               {"time_s": t_pt, "velocity_mm_s": _flow_at(flow, pts, t_pt)},
+                               track_arrays={"diameter_um": truth["diameters_um"]})
+        files.append(f_tr)
+        b.update()
+        for t in times:
+            pvd += [(f, t, 3, "piv"), (f_tr, t, 4, "tracks_true")]
+        files.append(vt.write_collection(out / "run.pvd", sorted(pvd, key=lambda x: (x[1], x[2]))))
+        b.update()
+    log.info("vtk export: %d files in %s (open run.pvd in ParaView)", len(files), out)
+    return files
+
+
+def _flow_at(flow, pts, t_s) -> np.ndarray:
+    """The flow's velocity at points with their own times (grouped by distinct time)."""
+    v = np.empty_like(pts)
+    for t in np.unique(t_s):  # a handful of sample times, each vectorised over points
+        sel = t_s == t
+        v[sel] = flow(pts[sel], float(t))
+    return v
+
