@@ -233,6 +233,7 @@ def evaluate_point(system: SapivSystem, cameras, mappings, table, *, density_per
     if density_per_mm3 <= 0:
         raise ConfigError(f"evaluate_point: density_per_mm3 must be > 0, got {density_per_mm3!r}.")
     t0 = time.perf_counter()
+    c0 = time.process_time()
     rng = np.random.default_rng(seed)
     vx = system.voxel_mm
     n_side = int(round(patch_mm / vx))
@@ -290,4 +291,5 @@ def evaluate_point(system: SapivSystem, cameras, mappings, table, *, density_per
         "t_metrics_s": time.perf_counter() - t_m,
     }
     out["t_total_s"] = time.perf_counter() - t0
+    out["cpu_s"] = time.process_time() - c0
     return out
