@@ -108,10 +108,12 @@ class RefocusResult:
     planes : (n_z, n_points) float32, thresholded (or raw with ``threshold_k=None``).
     mu, sigma : (n_z,) normal fit of each raw plane's noise histogram.
     peak : (n_z,) maximum of each raw plane.
+    mean, std : (n_z,) plain mean and standard deviation of each raw plane (the normal fit
+        of the whole histogram, signal tail included).
     """
 
-    def __init__(self, planes, mu, sigma, peak):
-        self.planes, self.mu, self.sigma, self.peak = planes, mu, sigma, peak
+    def __init__(self, planes, mu, sigma, peak, mean=None, std=None):
+        self.planes, self.mu, self.sigma, self.peak, self.mean, self.std = planes, mu, sigma, peak, mean, std
 
 
 def refocus_planes(images, mappings, xy_mm, z_mm, *, warp: str = "homography", threshold_k: float | None = 3.0,
@@ -147,6 +149,8 @@ def refocus_planes(images, mappings, xy_mm, z_mm, *, warp: str = "homography", t
     mu = np.empty(len(z))
     sigma = np.empty(len(z))
     peak = np.empty(len(z))
+    mean = np.empty(len(z))
+    std = np.empty(len(z))
     xyh = np.column_stack([xy, np.ones(n)])
     for k in track(range(len(z)), desc="refocus: planes", progress=progress, unit="plane"):
         acc = np.zeros(n)
@@ -167,5 +171,6 @@ def refocus_planes(images, mappings, xy_mm, z_mm, *, warp: str = "homography", t
         raw = np.where(cnt > 0, acc / np.maximum(cnt, 1), 0.0)
         mu[k], sigma[k] = noise_normal_fit(raw)
         peak[k] = raw.max()
+        mean[k], std[k] = raw.mean(), raw.std()
         planes[k] = raw if threshold_k is None else np.where(raw > mu[k] + threshold_k * sigma[k], raw, 0.0)
-    return RefocusResult(planes, mu, sigma, peak)
+    return RefocusResult(planes, mu, sigma, peak, mean, std)

@@ -224,7 +224,7 @@ def evaluate_point(system: SapivSystem, cameras, mappings, table, *, density_per
 
     Returns a dict: Q (eq. 4.1), Qprime (eq. 4.2) against Gaussian blobs of
     ``truth_sigma_voxels``, Q_point and Qprime_point against the voxel-occupancy truth, SNR (eq. 4.3), mu / sigma (means over the
-    planes of the normal fit), particles, voxels and wall times [s].
+    planes of the normal fit to the noise part), mu_all / sigma_all (of the whole planes), particles, voxels and wall times [s].
     """
     from mitpiv.analysis.quality import occupancy_volume, quality_q, rank_correlation, snr_from_fits, truth_volume
     from mitpiv.imaging import splat_points
@@ -283,6 +283,8 @@ def evaluate_point(system: SapivSystem, cameras, mappings, table, *, density_per
         "SNR": snr_from_fits(rf.peak, rf.mu, rf.sigma),
         "mu": float(np.mean(rf.mu)),
         "sigma": float(np.mean(rf.sigma)),
+        "mu_all": float(np.mean(rf.mean)),
+        "sigma_all": float(np.mean(rf.std)),
         "particles": int(len(p)),
         "voxels": int(vr.size),
         "kept_fraction": float(np.mean(vr > 0)),
