@@ -149,12 +149,12 @@ def run(ctx) -> ReplicationResult:
     top = dens[-1]
 
     def series(d, sa, m, q):
-        return [R[(d, sa, m, rho)][q] for rho in dens]
+        return [float(R[(d, sa, m, rho)].get(q, math.nan)) for rho in dens]
 
     def nsnr(d, sa, m, ref):
         return [normalised_snr(R[(d, sa, m, rho)]["SNR"], R[ref + (rho,)]["SNR"]) for rho in dens]
 
-    g = lambda d, sa=0.0, m="none", q="Q", rho=top: R[(d, sa, m, rho)][q]  # noqa: E731
+    g = lambda d, sa=0.0, m="none", q="Q", rho=top: float(R[(d, sa, m, rho)].get(q, math.nan))  # noqa: E731
     curves = {
         "Q_vs_density_distortion": Curve(dens, {f"D{_fmt(d)}": series(d, 0.0, "none", "Q") for d in D_LEVELS},
                                          "particles/mm^3", "Q (eq. 4.1)"),
@@ -185,6 +185,11 @@ def run(ctx) -> ReplicationResult:
                                       "particles/mm^3", "Q (eq. 4.1), point truth"),
         "Qprimepoint_vs_density_distortion": Curve(dens, {f"D{_fmt(d)}": series(d, 0.0, "none", "Qprime_point")
                                                           for d in D_LEVELS}, "particles/mm^3", "Q' (eq. 4.2), point truth"),
+        "sigma_all_vs_density_distortion": Curve(dens, {f"D{_fmt(d)}": series(d, 0.0, "none", "sigma_all")
+                                                        for d in D_LEVELS}, "particles/mm^3",
+                                                 "std of the whole refocused plane"),
+        "sigma_all_vs_density_SA": Curve(dens, {f"SA{_fmt(sa)}": series(0.0, sa, "none", "sigma_all") for sa in SA_LEVELS},
+                                         "particles/mm^3", "std of the whole refocused plane"),
         "SNR_vs_density_distortion": Curve(dens, {f"D{_fmt(d)}": series(d, 0.0, "none", "SNR") for d in D_LEVELS},
                                            "particles/mm^3", "SNR (eq. 4.3)"),
         "Q_vs_density_brown_calibration": Curve(dens, {f"D{_fmt(d)}_brown": series(d, 0.0, "brown", "Q")
@@ -246,6 +251,11 @@ def run(ctx) -> ReplicationResult:
     rows.append(compare_trend("sigma_SA0.1_over_SA0", f"sigma of the normal fit, SA 0.1 over SA 0, {top} particles/mm^3",
                               "Fig. 4-9", "< 1 (sigma decreases for SA >= 0.02)", s_ratio, s_ratio < 1.0,
                               tolerance="below 1"))
+    s_all = g(2.0, q="sigma_all") / g(0.0, q="sigma_all")
+    rows.append(compare_trend("sigma_all_D2_over_D0", f"std of the whole refocused planes, 2 % over 0 %, {top} "
+                              "particles/mm^3", "Fig. 4-8 (our reading: a fit to the whole histogram)",
+                              "< 1 (sigma decreases for D >= 0.5 %)", s_all, s_all < 1.0, tolerance="below 1",
+                              note="tests whether the paper's sigma is the whole-histogram spread"))
     m_ratio = g(2.0, q="mu") / g(0.0, q="mu")
     rows.append(compare_trend("mu_D2_over_D0", f"mu of the normal fit, 2 % over 0 %, {top} particles/mm^3", "Fig. 4-6",
                               "1 (no significant effect)", m_ratio, abs(m_ratio - 1.0) <= 0.05, tolerance="±5 %"))
@@ -297,6 +307,7 @@ def run(ctx) -> ReplicationResult:
               ("fig4-11_nSNR_SA.png", "nSNR_vs_density_SA", "Fig. 4-11 (ours): nSNR, SA"),
               ("truth_Qpoint_distortion.png", "Qpoint_vs_density_distortion", "Q against point truth, D"),
               ("truth_Qpoint_SA.png", "Qpoint_vs_density_SA", "Q against point truth, SA"),
+              ("sigma_all_distortion.png", "sigma_all_vs_density_distortion", "std of the whole planes, D"),
               ("whatnext_Q_brown.png", "Q_vs_density_brown_calibration", "What next: Q with a Brown calibration")]
     for fname, key, title in groups:
         c = curves[key]
@@ -382,6 +393,35 @@ def run(ctx) -> ReplicationResult:
         f"{max(cr['rms_px']):.3f} (reference camera {cr['rms_px'][ref]:.3f}); dots are located to "
         f"{max(cr['locate_rms_px']):.4f} px RMS. A pinhole absorbs part of a radial distortion (the centre camera "
         "keeps the largest residual: it looks straight along the axis, where a tilt cannot mimic the distortion).",
+        "## Disagreements and their causes\n\n"
+        f"- **Level of Q at 0 %** ({q0:.3f} at {top} particles/mm^3, paper >= 0.75 where adequate): set by the true "
+        "volume, which the paper does not define (see the section above); against points it is lower still. The "
+        "distortion ordering, the 1-2 % collapse below 0.75 and the SA/distortion additivity are what we compare.\n"
+        f"- **Q against density**: ours rises with density at 0 % ({series(0.0, 0.0, 'none', 'Q')[0]:.3f} at "
+        f"{dens[0]} to {q0:.3f} at {top}); the threshold mu + 3 sigma rises with the out-of-focus background and "
+        "trims the depth-elongated tails of the refocused particles, which the compact true blobs do not have.\n"
+        f"- **SA cost** (paper: up to 0.04 at the highest density; ours {q0 - g(0.0, 0.1):+.3f} against blobs, "
+        f"{g(0.0, q='Q_point') - g(0.0, 0.1, q='Q_point'):+.3f} against points): our exact PSF moves less light out "
+        "of the centre pixel than the paper's Table 3.3 (0.856 vs 0.786 at 0.1 waves), and a blurred "
+        "reconstruction can match a blob truth as well as a sharp one.\n"
+        f"- **Q' level** (paper > 0.97; ours {g(0.0, q='Qprime'):.4f} against blobs, "
+        f"{g(0.0, q='Qprime_point'):.4f} against points): eq. 4.2 is uncentred, so its level is the tie floor of the "
+        "truth's zero set; blob tails make few exact zeros. The drop at 2 % is "
+        f"{g(0.0, q='Qprime') - g(2.0, q='Qprime'):+.4f} (blobs), "
+        f"{g(0.0, q='Qprime_point') - g(2.0, q='Qprime_point'):+.4f} (points).\n"
+        f"- **sigma of the noise fit against distortion** (paper: decreasing for D >= 0.5 %; ours "
+        f"{g(2.0, q='sigma') / g(0.0, q='sigma'):.3f} at 2 %): distortion moves each camera's out-of-focus "
+        "background by a smooth field without changing its statistics, so the noise part of the histogram keeps "
+        "its width; only the in-focus tail changes. The spread of the whole plane (sigma_all, "
+        f"{g(2.0, q='sigma_all') / g(0.0, q='sigma_all'):.3f} at 2 %) tests the reading that the paper fitted the "
+        "whole histogram, tail included. The aberration, a blur, does narrow the noise part (SA 0.1: "
+        f"{g(0.0, 0.1, q='sigma') / g(0.0, q='sigma'):.3f}).\n"
+        f"- **nSNR at 0.1 %** (paper: degraded; ours {normalised_snr(g(0.1, q='SNR'), snr0):.3f}): with eq. A.3 a "
+        "0.1 % distortion moves points by at most 0.09 px inside half the corner radius (Table 3.1 says 0.18) and "
+        "0.7 px at the corners, and the pinhole calibration absorbs part of it; the loss appears from 0.5 % on "
+        f"(nSNR {normalised_snr(g(0.5, q='SNR'), snr0):.3f}, 1 % {normalised_snr(g(1.0, q='SNR'), snr0):.3f}).\n"
+        "- **Table 3.1 and Table 3.3**: see their sections (an inconsistency of the paper's table with its eq. A.3; "
+        "the paper's PSF discretisation).",
         "## What next: a calibration that models distortion\n\n"
         + "\n".join(f"- D {d} %: Q = {qb:.3f} with a Brown-Conrady calibration (refocusing through the full mapping), "
                     f"{g(d):.3f} with the pinhole, {q0:.3f} at 0 %" + (f"; recovers {rec:.0%} of the loss" if math.isfinite(rec) else "")
@@ -390,6 +430,8 @@ def run(ctx) -> ReplicationResult:
         f"cameras; refocusing {t_brown:.1f} s (projecting through the distortion model) vs {t_none:.1f} s (homographies) "
         "for the crop.",
     ]
+    for c in curves.values():  # NaN (a point cached before a quantity was recorded) is written as null
+        c.y = {k: [None if (v is None or not math.isfinite(v)) else v for v in ys] for k, ys in c.y.items()}
     return ReplicationResult(rows=rows, curves=curves, sections=sections, figures=figures)
 
 
