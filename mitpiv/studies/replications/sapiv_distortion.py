@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 from functools import lru_cache
 
+import numpy as np
+
 from mitpiv.studies.replication import Curve, ReplicationResult, Study, compare_trend, compare_value
 
 D_LEVELS = (0.0, 0.1, 0.5, 1.0, 2.0)
@@ -47,6 +49,11 @@ def _configs(scale: dict) -> list[tuple[float, float, str]]:
     cfg += [(d, 0.1, "none") for d in scale["combined_levels"] if d != 0.0]
     cfg += [(d, 0.0, "brown") for d in scale["brown_levels"]]
     return cfg
+
+
+def _mean_cpu(points: dict) -> float:
+    cpu = [r["cpu_s"] for r in points.values() if "cpu_s" in r]
+    return float(np.mean(cpu)) if cpu else math.nan
 
 
 def _ckey(d: float, sa: float, model: str) -> str:
@@ -367,7 +374,11 @@ def run(ctx) -> ReplicationResult:
         "every particle within the largest parallax (8.6 mm) of a patch is imaged on the full 1000 x 1000 sensors, so "
         "each patch sees the distortion of its own place in every camera's field. Q, Q' and the histograms are "
         "computed over the union of the patches (the full run's 3 x 3 lattice samples the field evenly: "
-        f"{len(sc['patches']) * (sc['patch_mm'] / 50) ** 2:.1%} of the volume).",
+        f"{len(sc['patches']) * (sc['patch_mm'] / 50) ** 2:.1%} of the volume). "
+        f"Cost: {len(R)} points of {_mean_cpu(R):.0f} s CPU each on average (where recorded) and {len(cal)} "
+        f"calibrations of {np.mean([c['report']['wall_s'] for c in cal.values()]):.0f} s wall each: about "
+        f"{(len(R) * _mean_cpu(R) + sum(c['report']['wall_s'] for c in cal.values())) / 2 / 60:.0f} min on an idle "
+        "2-core machine with `--workers 2` (the wall time above is on a shared, loaded machine).",
         "## Table 3.1: percent distortion (appendix A)\n\n"
         "| distortion | paper shift at r_n = 0.1 / 0.5 / 1.0 [px] | ours (eq. A.3 with A.8) |\n|---|---|---|\n"
         + "\n".join(dist_lines) + "\n\n"
