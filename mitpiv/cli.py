@@ -75,7 +75,8 @@ def cmd_sensor(args) -> int:
             raise MitpivError(f"sensor: {path} and {where[key]} are both camera {key[0]!r}, frame {key[1]}; give each "
                               f"(camera, frame) once.")
         images[key], where[key] = img if img.ndim == 2 else img[..., 0], path
-    res = apply_sensor_set(images, model, seed=args.seed, progress=_progress(args))
+    # all-black output (e.g. no --exposure: radiance taken as photons rounds to 0) is refused
+    res = apply_sensor_set(images, model, seed=args.seed, progress=_progress(args), on_degenerate="raise")
     out = Path(args.out)
     for key, (path, _, meta) in zip(keys, inputs, strict=True):
         target = out / f"{path.stem}.{args.format}"

@@ -35,15 +35,16 @@ from __future__ import annotations
 import logging
 import math
 import numbers
+import warnings
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 
 import numpy as np
 
-from mitpiv.errors import ConfigError, check_positive
+from mitpiv.errors import ConfigError, MitpivWarning, check_positive
 
-__all__ = ["SensorModel", "SensorSetResult", "apply_sensor", "apply_sensor_set", "resolve_exposure",
+__all__ = ["SensorModel", "SensorSetResult", "apply_sensor", "apply_sensor_set", "resolve_exposure", "degenerate_counts",
            "convolve_psf", "sensor_mean_variance", "PointPSFTable", "splat_points"]
 
 _log = logging.getLogger(__name__)
@@ -255,6 +256,8 @@ class SensorSetResult:
         The derived 64-bit noise seed of each image
         (:func:`mitpiv.streams.sensor_seed`); ``apply_sensor(image, model, seed=seeds[key],
         scene_peak=scene_peak)`` reproduces ``counts[key]``.
+    degenerate : dict {(camera_id, frame): str}
+        Images that carry no particle signal, with the reason (:func:`degenerate_counts`).
     """
 
     counts: dict
@@ -264,6 +267,7 @@ class SensorSetResult:
     noise_peak_counts: float | None
     seed: int
     seeds: dict = field(default_factory=dict)
+    degenerate: dict = field(default_factory=dict)
 
     def metadata(self, key) -> dict:
         """JSON-ready record of how image ``key`` was taken, for its file's metadata: the
@@ -277,8 +281,32 @@ class SensorSetResult:
                 "stream": {"purpose": "sensor", "camera": cam, "frame": frame}}
 
 
+def degenerate_counts(counts: np.ndarray, signal_peak_counts: float, model: SensorModel) -> str | None:
+    """Why an image of sensor counts carries no particle signal, or None when it does.
+
+    Degenerate: every pixel has the same count (black, or saturated), or, with
+    ``bit_depth``, the brightest noise-free signal is below half a count, so rounding leaves
+    only noise. ``signal_peak_counts`` is ``exposure * QE * scene_peak / gain`` [counts].
+    """
+    c = np.asarray(counts)
+    fix = ("raise the exposure: give 'exposure' (photons per unit of rendered radiance; mitpiv sensor "
+           "--exposure) or 'peak_photons' (--peak-photons)")
+    if signal_peak_counts <= 0:
+        return "the rendered image is black (no light reached this camera); no exposure can help: see the render"
+    if model.bit_depth is not None and signal_peak_counts < 0.5:
+        return (f"the brightest pixel's signal is {signal_peak_counts:.3g} counts (exposure x QE x scene peak / "
+                f"gain), below half a count: rounding to {model.bit_depth} bits leaves no particle; {fix}")
+    if c.size and c.min() == c.max():
+        top = None if model.bit_depth is None else 2 ** model.bit_depth - 1
+        if top is not None and c.max() == top:
+            return (f"every pixel saturates at {top} counts ({model.bit_depth} bits); lower the exposure or "
+                    f"peak_photons, or raise full_well_e / gain_e_per_count")
+        return f"every pixel is {c.max()!r} counts (signal peak {signal_peak_counts:.3g} counts); {fix}"
+    return None
+
+
 def apply_sensor_set(images: Mapping, model: SensorModel | None = None, *, seed: int, progress=None,
-                     **kwargs) -> SensorSetResult:
+                     on_degenerate: str = "warn", **kwargs) -> SensorSetResult:
     """Turn a set of rendered images (every camera and frame of an experiment) into counts
     with one scene-wide exposure and one independent noise stream per image.
 
@@ -299,6 +327,12 @@ def apply_sensor_set(images: Mapping, model: SensorModel | None = None, *, seed:
         The experiment seed, an integer in [0, 2**63).
     progress : None, bool or callable
         See :mod:`mitpiv.progress`.
+    on_degenerate : "warn", "raise" or "ignore"
+        What to do when images carry no particle signal (:func:`degenerate_counts`; all
+        black, say, because no exposure was given): "warn" issues a
+        :class:`~mitpiv.errors.MitpivWarning` naming them; "raise" raises
+        :class:`ConfigError` when *every* image is degenerate (warns for some);
+        "ignore" only records them in ``result.degenerate``.
 
     Returns
     -------
@@ -324,12 +358,25 @@ def apply_sensor_set(images: Mapping, model: SensorModel | None = None, *, seed:
         raise ConfigError("apply_sensor_set: two keys name the same (camera_id, frame).")
     scene_peak = max(float(a.max()) for a in arrays.values())
     exposure, noise_peak = resolve_exposure(m, scene_peak)
-    counts, seeds = {}, {}
+    if on_degenerate not in ("warn", "raise", "ignore"):
+        raise ConfigError(f"apply_sensor_set: 'on_degenerate' must be 'warn', 'raise' or 'ignore', got {on_degenerate!r}.")
+    counts, seeds, bad = {}, {}, {}
     for key in track(list(arrays), desc="sensor", progress=progress, unit="image"):
         seeds[key] = streams.sensor_seed(seed, *key)
         counts[key] = _counts(arrays[key], m, np.random.default_rng(seeds[key]), exposure, noise_peak)
+        signal = exposure * m.quantum_efficiency * float(arrays[key].max()) / m.gain_e_per_count
+        reason = degenerate_counts(counts[key], signal, m)
+        if reason is not None:
+            bad[key] = reason
+    if bad and on_degenerate != "ignore":
+        first = next(iter(bad))
+        text = (f"{len(bad)} of {len(arrays)} sensor image(s) carry no particle signal, e.g. camera {first[0]!r} "
+                f"frame {first[1]}: {bad[first]}.")
+        if on_degenerate == "raise" and len(bad) == len(arrays):
+            raise ConfigError(f"sensor: {text}")
+        warnings.warn(text, MitpivWarning, stacklevel=2)
     return SensorSetResult(counts=counts, model=m, exposure=exposure, scene_peak=scene_peak,
-                           noise_peak_counts=noise_peak, seed=seed, seeds=seeds)
+                           noise_peak_counts=noise_peak, seed=seed, seeds=seeds, degenerate=bad)
 
 
 def sensor_mean_variance(signal_photons: float, model: SensorModel) -> tuple[float, float]:

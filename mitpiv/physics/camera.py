@@ -33,7 +33,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
-from mitpiv.physics.distortion import Distortion, check_distortion, distort, distort_jacobian, undistort
+from mitpiv.physics.distortion import Distortion, check_distortion, distort, distort_jacobian, fold_radius, undistort
 
 __all__ = [
     "Camera",
@@ -229,12 +229,26 @@ class PinholeCamera:
         """Points (..., 3) [mm] in front of the pinhole (camera-frame z > 0), shape (...)."""
         return self.world_to_camera(p_world_mm)[..., 2] > 0
 
+    @property
+    def fold_radius(self) -> float:
+        """Undistorted normalised radius beyond which the distortion folds back
+        (:func:`mitpiv.physics.distortion.fold_radius`; ``inf`` without a fold)."""
+        return fold_radius(self.distortion)
+
     def visible(self, p_world_mm) -> np.ndarray:
         """Points (..., 3) [mm] in front of the pinhole whose projection lands on the sensor
         ``[0, W) x [0, H)``, shape (...). (A point behind the pinhole projects mirrored,
-        possibly onto the sensor: reconstructions must leave it out.)"""
+        possibly onto the sensor: reconstructions must leave it out.) With a distortion
+        that folds back (strong barrel), a point beyond the fold radius is not visible
+        although :meth:`project` may land on the sensor: no pixel's ray reaches it, and the
+        renderer's particle tracing leaves it out too."""
         with np.errstate(invalid="ignore", over="ignore"):
-            return self.in_front(p_world_mm) & on_sensor(self.project(p_world_mm), self.resolution)
+            vis = self.in_front(p_world_mm) & on_sensor(self.project(p_world_mm), self.resolution)
+            r_fold = self.fold_radius
+            if np.isfinite(r_fold):
+                pc = self.world_to_camera(p_world_mm)
+                vis &= pc[..., 0] ** 2 + pc[..., 1] ** 2 < (r_fold * pc[..., 2]) ** 2
+            return vis
 
     def jacobian(self, p_world_mm) -> np.ndarray:
         """``d(u, v)/d(x, y, z)`` of :meth:`project`, shape (..., 2, 3) [px/mm] (analytic:

@@ -34,6 +34,7 @@ __all__ = [
     "percent_to_k1",
     "percent_shift",
     "check_distortion",
+    "fold_radius",
 ]
 
 
@@ -137,6 +138,23 @@ def undistort(xd, yd, d: Distortion, *, iterations: int = 8):
         x = x - (e * rx - b * ry) * inv_det
         y = y - (a * ry - c * rx) * inv_det
     return x, y
+
+
+def fold_radius(d: Distortion) -> float:
+    """Undistorted normalised radius where the radial map ``r R(r^2)`` stops increasing
+    (``inf`` when it never does): the edge of the model's invertible branch.
+
+    Beyond it a strong barrel distortion folds back, so a point far outside the field of
+    view would land inside the image, although no pixel's ray (the inverse, on the
+    principal branch) reaches it. Cameras treat points beyond this radius as not visible,
+    in both transport strategies and in reconstruction (see
+    :meth:`mitpiv.physics.camera.PinholeCamera.visible`). Smallest positive root ``s = r^2``
+    of ``1 + 3 k1 s + 5 k2 s^2 + 7 k3 s^3`` (the tangential terms are not part of the radial
+    branch; :func:`check_distortion` checks the full Jacobian over the image).
+    """
+    roots = np.roots([7.0 * d.k3, 5.0 * d.k2, 3.0 * d.k1, 1.0]) if not d.is_zero else np.array([])
+    s = [float(r.real) for r in np.atleast_1d(roots) if abs(r.imag) <= 1e-12 * max(1.0, abs(r)) and r.real > 0]
+    return float(np.sqrt(min(s))) if s else float("inf")
 
 
 def percent_to_k1(percent: float, *, r_max: float) -> float:

@@ -4,6 +4,13 @@ A scene XML refers to per-frame particle files as ``particles_$frame.ply``; ``fr
 any ``-D name=value`` parameter are substituted by Mitsuba's own ``$name`` mechanism.
 Before Mitsuba sees the file, every particle file the frame needs is checked (it exists and
 is a valid mitpiv PLY), so a missing frame gives a clear :class:`ConfigError`.
+
+Scenes are loaded with Mitsuba's parser optimisations off (``optimize=False``): its
+``merge_equivalent`` pass merges plugin instances with identical properties *ignoring their
+ids*, sensors included, so two cameras that differ only in id (the same view rendered twice
+for independent noise) would become one object listed twice and the second camera would
+never be rendered. After loading, sensor ids are checked to be unique
+(:func:`check_sensor_ids`).
 """
 
 from __future__ import annotations
@@ -19,7 +26,8 @@ from mitpiv.errors import ConfigError, FileFormatError, MitpivError
 from mitpiv.io.particles import read_particles_ply
 from mitpiv.render.variant import ensure_variant
 
-__all__ = ["load_scene", "load_dict", "bind_particle_shapes", "scene_defaults", "particle_files", "raise_plugin_error"]
+__all__ = ["load_scene", "load_dict", "bind_particle_shapes", "scene_defaults", "particle_files", "raise_plugin_error",
+           "check_sensor_ids"]
 
 _PARTICLE_SHAPES = ("ellipsoidsmesh", "ellipsoids")
 
@@ -80,6 +88,22 @@ def bind_particle_shapes(scene) -> list:
     return emitters
 
 
+def check_sensor_ids(scene, where: str = "scene") -> list[str]:
+    """The ids of the scene's sensors (``sensor{i}`` for one without an id); raise
+    :class:`ConfigError` when two sensors are one object or share an id, since each camera's
+    images are named and seeded by its id."""
+    sensors = list(scene.sensors())
+    ids = [s.id() or f"sensor{i}" for i, s in enumerate(sensors)]
+    same = [i for i in range(len(sensors)) for j in range(i) if sensors[i] is sensors[j] or ids[i] == ids[j]]
+    if same:
+        raise ConfigError(
+            f"{where}: sensors {ids} are not distinct (sensor {same[0]} repeats an earlier one); every "
+            f"sensor needs its own id. If the scene was loaded with Mitsuba's optimize=True, identical "
+            f"sensors were merged: load it with mitpiv.render.scene.load_scene / load_dict."
+        )
+    return ids
+
+
 def raise_plugin_error(e: Exception, where: str):
     """Re-raise a Mitsuba loading error as the mitpiv error it wraps, else as ConfigError.
 
@@ -102,10 +126,11 @@ def load_dict(d: dict):
     default Mitsuba variant first if none is active, see :func:`ensure_variant`)."""
     ensure_variant()
     try:
-        obj = mi.load_dict(d)
+        obj = mi.load_dict(d, optimize=False)  # no merging of identical sensors (module docstring)
     except Exception as e:
         raise_plugin_error(e, "scene dictionary")
     if isinstance(obj, mi.Scene):
+        check_sensor_ids(obj, "scene dictionary")
         bind_particle_shapes(obj)
     return obj
 
@@ -145,10 +170,11 @@ def load_scene(xml_path, *, frame: int = 0, params: dict | None = None):
         except FileFormatError as e:
             raise ConfigError(f"frame {frame}: {e}") from None
     try:
-        scene = mi.load_file(str(xml_path), **values)
+        scene = mi.load_file(str(xml_path), optimize=False, **values)  # no sensor merging (module docstring)
     except MitpivError:
         raise
     except Exception as e:  # Mitsuba wraps plugin errors in RuntimeError
         raise_plugin_error(e, f"scene {str(xml_path)!r} (frame {frame})")
+    check_sensor_ids(scene, f"scene {str(xml_path)!r}")
     bind_particle_shapes(scene)
     return scene

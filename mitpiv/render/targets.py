@@ -16,6 +16,7 @@ from mitpiv.errors import ConfigError
 from mitpiv.physics.targets import CalibrationTarget, markers_world
 from mitpiv.progress import Progress, track
 from mitpiv.render.render import render_sensor, sensor_model
+from mitpiv.render.scene import load_dict
 from mitpiv.render.variant import ensure_variant
 
 __all__ = ["target_scene", "render_target_views", "save_target_views"]
@@ -45,7 +46,7 @@ def target_scene(sensors, target: CalibrationTarget, pose, *, radiance: float = 
     }
     for i, s in enumerate(sensors):
         d[f"sensor{i}"] = s
-    return mi.load_dict(d)
+    return load_dict(d)  # mitpiv's: sensors that differ only in id stay distinct
 
 
 def render_target_views(sensors, target: CalibrationTarget, poses, *, spp: int = 64, seed: int = 0,
@@ -65,7 +66,8 @@ def render_target_views(sensors, target: CalibrationTarget, poses, *, spp: int =
     poses = list(poses)
     for k, pose in enumerate(track(poses, desc="target views", progress=progress, unit="pose")):
         sc = target_scene(sensors, target, pose)
-        images = [render_sensor(sc, s, spp=int(spp), seed=seed + k) for s in sc.sensors()]
+        # each camera and pose its own stream (render_seed(seed, sensor id, pose index))
+        images = [render_sensor(sc, s, spp=int(spp), seed=seed, frame=k) for s in sc.sensors()]
         out.append({"pose": np.asarray(pose, dtype=float), "markers_world": markers_world(target, pose), "images": images})
         log.debug("target pose %d/%d rendered through %d camera(s)", k + 1, len(poses), len(images))
     return out

@@ -140,6 +140,7 @@ def _velocity_error(run: Path):
 def tomo_report(cfg, run_dir, results: dict, timings: dict) -> Report:
     """The report of a tomo run: sensor images, volume projections and slices, the
     sub-aperture mosaic of a plenoptic camera, particle and velocity errors, and tables."""
+    from mitpiv.studies.kinds.tomo import fmt_metric as f
     from mitpiv.studies.kinds.tomo import grid_of, images, source_of, volume
 
     run = Path(run_dir)
@@ -161,16 +162,23 @@ def tomo_report(cfg, run_dir, results: dict, timings: dict) -> Report:
     for frame in (0, 1):
         m = ev[f"frame{frame}"]
         pr = m["particles"]
-        u = pr.get("u95_vox", [float("nan")] * 3)
+        u = pr.get("u95_vox") or [None] * 3
+        pct = {k: None if pr.get(k) is None else 100 * pr[k] for k in ("detection_rate", "ghost_fraction")}
         q_rank = m["Q'"]
-        lines.append(f"| {frame} | {m['Q']:.3f} | {m['Q*']:.3f} | {q_rank:.3f} | {m['SNR']:.1f} | "
-                     f"{100 * pr['detection_rate']:.1f} % | {100 * pr['ghost_fraction']:.1f} % | "
-                     f"{u[0]:.3f} / {u[1]:.3f} / {u[2]:.3f} |")
-    r, b = pv["rms_vox"], pv["bias_vox"]
-    lines += ["", "## 3D PIV", "", f"{pv['n']} vectors, outlier ratio {100 * pv['outlier_ratio']:.2f} %.", "",
+        lines.append(f"| {frame} | {f(m['Q'], '.3f')} | {f(m['Q*'], '.3f')} | {f(q_rank, '.3f')} | "
+                     f"{f(m['SNR'], '.1f')} | {f(pct['detection_rate'], '.1f')} % | {f(pct['ghost_fraction'], '.1f')} % | "
+                     f"{f(u[0], '.3f')} / {f(u[1], '.3f')} / {f(u[2], '.3f')} |")
+    r, b = pv["rms_vox"] or [None] * 3, pv["bias_vox"] or [None] * 3
+    ratio = None if pv.get("outlier_ratio") is None else 100 * pv["outlier_ratio"]
+    lines += ["", "## 3D PIV", "", f"{pv['n']} vectors, outlier ratio {f(ratio, '.2f')} %.", "",
               "| | u | v | w |", "|---|---|---|---|",
-              f"| RMS error [voxels] | {r[0]:.4f} | {r[1]:.4f} | {r[2]:.4f} |",
-              f"| bias [voxels] | {b[0]:+.4f} | {b[1]:+.4f} | {b[2]:+.4f} |", "", "## Wall time per stage", ""]
+              f"| RMS error [voxels] | {f(r[0], '.4f')} | {f(r[1], '.4f')} | {f(r[2], '.4f')} |",
+              f"| bias [voxels] | {f(b[0], '+.4f')} | {f(b[1], '+.4f')} | {f(b[2], '+.4f')} |", ""]
+    why = {**{k: v for fr in (0, 1) for k, v in (ev[f"frame{fr}"].get("null_reasons") or {}).items()},
+           **(pv.get("null_reasons") or {})}
+    if why:  # n/a in the tables: say why
+        lines += ["Metrics without a value (n/a):", ""] + [f"- `{k}`: {v}" for k, v in why.items()] + [""]
+    lines += ["## Wall time per stage", ""]
     lines += _timings_table(timings)
     lines += [""] + [f"![{f[:-4].replace('_', ' ')}]({f})\n" for f in figures]
     return Report("\n".join(lines), figures)

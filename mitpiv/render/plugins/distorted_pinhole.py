@@ -116,7 +116,11 @@ point through the chief ray's point on the focus plane. Particle tracing
 (``sample_direction``) runs the forward model: point -> (aperture point ->) focus plane ->
 normalised coordinates -> distortion -> pixel, with the importance
 ``f_px^2 |det J_distortion| / (N_pixels cos^3 theta)``. A distortion that folds over inside
-the image is rejected at construction. Distortion, aperture and PSF code is only traced when
+the image is rejected at construction. A strong barrel distortion that folds back *outside*
+the image (beyond the undistorted radius :func:`~mitpiv.physics.distortion.fold_radius`)
+would map points far outside the field of view onto the image: particle tracing leaves
+points beyond the fold radius out, as camera tracing (which never reaches them) and the
+reconstruction mapping (:meth:`~mitpiv.physics.camera.PinholeCamera.visible`) do. Distortion, aperture and PSF code is only traced when
 the scene asks for it.
 
 .. code-block:: xml
@@ -219,6 +223,7 @@ class DistortedPinhole(MitpivSensor):
         self._cx, self._cy = cam.principal_point_px
         self._n_pix = float(w * h)
         self._r_ap = cam.aperture_radius_mm
+        self._r_fold = cam.fold_radius  # normalised; inf without a fold
         self._pos = mi.ScalarPoint3f(*position.tolist())
         lin = np.eye(4)
         lin[:3, :3] = to_world[:3, :3]
@@ -362,6 +367,10 @@ class DistortedPinhole(MitpivSensor):
         dist = dr.norm(dvec)
         cos_t = dvec.z / dist
         dd = self.camera.distortion
+        if math.isfinite(self._r_fold):
+            # beyond the fold the distortion maps back onto the image, where no pixel's ray
+            # (camera tracing: the inverse, on the principal branch) reaches: not seen
+            active &= xn * xn + yn * yn < self._r_fold * self._r_fold
         if dd.is_zero:
             xd, yd, jac = xn, yn, 1.0
         else:

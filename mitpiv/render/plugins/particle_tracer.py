@@ -36,6 +36,22 @@ without samples (pinhole, no jitter PSF) gives the same image on every pass, so 
 rendered once, exactly. :attr:`ParticleTracer.last_stats` says what the last render used
 (``passes``, ``rays_per_particle``, ``samples_per_particle``, ``spp_requested``).
 
+Random streams: the aperture / PSF samples of emitter ``k`` seen by sensor ``id`` come from
+PCG32 sequences whose initial state is ``mitpiv.streams.derived_seed(seed,
+"particle_tracer", id, k)`` (the render's seed, the sensor's id and the emitter's index hashed
+by NumPy's SeedSequence), one sequence per particle ray and pass. Two cameras rendered with
+the same seed therefore draw independent samples; :func:`mitpiv.render.render_scene`
+(and ``render_sensor(..., frame=f)``) also give every camera and frame its own seed.
+
+Determinism: the rays are traced in parallel, but their splats are accumulated into the
+image on one CPU thread, in ray order (LLVM variants). Float additions into one pixel in a
+thread-dependent order made same-seed images differ in the last bits (about a third of the
+pixels of a 128 px render); accumulated serially, a render is bit-identical for a seed on one
+machine and variant. The serial accumulation costs one pass over the splats (a gather and a
+few scatter-adds per splat and filter tap). On CUDA variants the GPU's atomic additions keep
+an unspecified order: pixels may differ by float32 rounding of their sum (see
+:data:`mitpiv.render.render.DETERMINISM`).
+
 This is the particle-tracing estimator of the image that camera
 tracing (Mitsuba's ``direct`` integrator) estimates pixel by pixel, so both agree within
 their noise. Works with ``distorted_pinhole`` and with Mitsuba's ``perspective`` and
@@ -52,13 +68,47 @@ through other surfaces).
 
 from __future__ import annotations
 
+import numbers
+from contextlib import contextmanager
+
 import drjit as dr
 import mitsuba as mi
 
 from mitpiv.errors import ConfigError
 from mitpiv.render.plugins._props import PropertyReader
+from mitpiv.streams import derived_seed
 
 _VARIANT = mi.variant()
+
+
+def _seed_int(seed) -> int:
+    """The render seed as a Python int (``mi.render`` passes what the caller gave: an int or
+    a one-entry ``mi.UInt32``)."""
+    if isinstance(seed, numbers.Integral):
+        return int(seed)
+    if dr.is_array_v(seed) and dr.width(seed) == 1:
+        return int(seed[0])
+    raise ConfigError(f"particle_tracer: the render seed must be one non-negative integer, got {seed!r}.")
+
+
+@contextmanager
+def serial_accumulation():
+    """Run the Dr.Jit kernels launched inside on one CPU thread (LLVM variants; nothing
+    changes on CUDA): scatter-additions then happen in lane order, so float sums into one
+    pixel are bit-reproducible. The thread count is restored afterwards."""
+    if not _VARIANT.startswith("llvm"):
+        yield
+        return
+    n, expand = dr.thread_count(), dr.expand_threshold()
+    dr.sync_thread()  # kernels launch asynchronously: none may run while the pool changes
+    dr.set_thread_count(1)
+    dr.set_expand_threshold(0)  # no per-thread copies of the target (sized by the pool)
+    try:
+        yield
+        dr.sync_thread()
+    finally:
+        dr.set_expand_threshold(expand)
+        dr.set_thread_count(n)
 
 
 class ParticleTracer(mi.CppADIntegrator):
@@ -98,12 +148,15 @@ class ParticleTracer(mi.CppADIntegrator):
         block = mi.ImageBlock(size, mi.ScalarPoint2i(0, 0), 1, film.rfilter(), False, True, False, False, False)
         rays = self.rays_for(sensor)
         passes = self.passes_for(sensor, spp)
+        seed = _seed_int(seed)
+        sid = sensor.id() or ""
         splats = 0
         for k, emitter in enumerate(self.particle_emitters(scene)):
             center, radius, diameter = emitter.particle_arrays()
             n = dr.width(diameter)
             if n == 0:
                 continue
+            state = derived_seed(seed, "particle_tracer", sid, k)  # this sensor's and emitter's stream
             for pas in range(passes):
                 # Pass p draws from PCG32 sequences [p n rays, (p + 1) n rays): pass 0 is the
                 # single-pass render, and no two passes share a sequence.
@@ -113,9 +166,9 @@ class ParticleTracer(mi.CppADIntegrator):
                 it.p = dr.gather(mi.Point3f, center, pid)
                 it.time = mi.Float(sensor.shutter_open())
                 if sensor.needs_aperture_sample():
-                    # opaque offset: every pass reuses one compiled kernel
+                    # opaque offset and state: every pass and seed reuses one compiled kernel
                     seq = mi.UInt64(idx) + dr.opaque(mi.UInt64, pas * n * rays)
-                    rng = mi.PCG32(size=n * rays, initstate=mi.UInt64(seed) * 0x9E3779B97F4A7C15 + k, initseq=seq)
+                    rng = mi.PCG32(size=n * rays, initstate=dr.opaque(mi.UInt64, state), initseq=seq)
                     sample = mi.Point2f(rng.next_float32(), rng.next_float32())
                 else:
                     sample = mi.Point2f(0.5, 0.5)
@@ -128,9 +181,11 @@ class ParticleTracer(mi.CppADIntegrator):
                     active &= ~scene.ray_test(ray, active)
                 intensity = emitter.intensity(it.p, dr.gather(mi.Float, diameter, pid), ds.d, it.wavelengths, active)
                 value = intensity * w_sensor[0] * (n_pix / (rays * passes))
-                block.put(ds.uv, [value], active)
-                if passes > 1:
-                    dr.eval(block.tensor())  # one pass at a time: memory of n * rays lanes
+                uv = mi.Point2f(ds.uv)
+                dr.eval(uv, value, active)  # the rays, traced in parallel
+                with serial_accumulation():  # their splats, summed in ray order (module docstring)
+                    block.put(uv, [value], active)
+                    dr.eval(block.tensor())
                 splats += n * rays
         self.last_stats = {"rays_per_particle": rays, "passes": passes, "samples_per_particle": rays * passes,
                            "spp_requested": int(spp) if spp else None, "splats": splats,

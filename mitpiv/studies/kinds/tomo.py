@@ -318,7 +318,8 @@ def stage_sensor(ctx: StageContext) -> dict:
         for img, meta, f in zip(imgs, ms, files, strict=True):
             key = (meta.get("sensor_id") or f.stem.rsplit("_frame", 1)[0], frame)
             rendered[key], metas[key], names[key] = img, meta, f.name
-    res = apply_sensor_set(rendered, model, seed=cfg.seed, progress=ctx.progress)
+    # every image without particle signal (no exposure: radiance rounds to 0 counts) is refused
+    res = apply_sensor_set(rendered, model, seed=cfg.seed, progress=ctx.progress, on_degenerate="raise")
     for key, c in res.counts.items():
         write_exr(ctx.out / names[key], np.asarray(c, dtype=np.float32),
                   {**metas[key], "sensor": res.metadata(key)})
@@ -366,8 +367,53 @@ def volume(run: Path, frame: int):
     return read_volume(run / "reconstruct" / f"volume_{frame}.npz")[0]
 
 
+def null_metrics(metrics: dict, reasons: dict, *, where: str) -> dict:
+    """Metrics with no value as ``None`` plus the reason: never NaN in a result.
+
+    Every non-finite float (NaN, inf; in lists too) becomes ``None``; the dotted path of
+    each (a list counts once) goes into ``metrics["null_reasons"]`` with the first reason of
+    ``reasons`` (``{path prefix: reason}``, ``""`` matching all) whose prefix it starts
+    with. Keys already ``None`` that ``reasons`` names exactly are listed too. A
+    :class:`~mitpiv.errors.MitpivWarning` names them.
+    """
+    import math
+    import warnings
+
+    from mitpiv.errors import MitpivWarning
+
+    nulls = {}
+
+    def reason(path):
+        return next((r for k, r in reasons.items() if path.startswith(k)), "not computable")
+
+    def walk(x, path):
+        if isinstance(x, dict):
+            return {k: walk(v, f"{path}.{k}" if path else str(k)) for k, v in x.items()}
+        if isinstance(x, list | tuple):
+            out = [walk(v, None) for v in x]
+            if any(v is None for v in out) and path is not None:
+                nulls[path] = reason(path)
+            return out
+        if x is None and path in reasons:
+            nulls[path] = reasons[path]
+        if isinstance(x, float) and not math.isfinite(x):
+            if path is not None:
+                nulls[path] = reason(path)
+            return None
+        return x
+
+    out = walk(metrics, "")
+    if nulls:
+        out["null_reasons"] = {**out.get("null_reasons", {}), **nulls}
+        first = next(iter(nulls))
+        warnings.warn(f"{where}: {len(nulls)} metric(s) have no value, e.g. {first!r}: {nulls[first]}.",
+                      MitpivWarning, stacklevel=2)
+    return out
+
+
 def stage_evaluate(ctx: StageContext) -> dict:
     from mitpiv import analysis
+    from mitpiv.analysis.summary import VOLUME_QUALITY_KEYS
     from mitpiv.io import read_truth
 
     cfg = ctx.cfg
@@ -376,9 +422,19 @@ def stage_evaluate(ctx: StageContext) -> dict:
     truth = read_truth(ctx.input("particles", "truth.npz"))
     metrics = {}
     for frame in FRAMES:
-        metrics[f"frame{frame}"], res = analysis.evaluate_volume(
-            volume(ctx.run_dir, frame), grid, truth["positions_mm"][frame], method=p.method,
+        vol = volume(ctx.run_dir, frame)
+        m, res = analysis.evaluate_volume(
+            vol, grid, truth["positions_mm"][frame], method=p.method,
             threshold_rel=p.threshold_rel, radius_voxels=p.radius_voxels)
+        reasons = {"particles": f"no reconstructed particle of frame {frame} matched a true one"}
+        if not np.any(np.asarray(vol) > 0):
+            # an empty volume correlates with nothing: its Q would read 0, not a measurement
+            why = (f"the reconstructed volume of frame {frame} is empty (no voxel > 0): the images carry no "
+                   f"particle inside the reconstruction bounds (check the sensor exposure, the cameras' view "
+                   f"and [reconstruction] bounds_mm)")
+            m.update({k: None for k in VOLUME_QUALITY_KEYS})
+            reasons = {**{k: why for k in VOLUME_QUALITY_KEYS}, "particles": why}
+        metrics[f"frame{frame}"] = null_metrics(m, reasons, where=f"evaluate frame {frame}")
         res.save(ctx.out / f"matches_{frame}.npz")
     return metrics
 
@@ -399,7 +455,9 @@ def stage_piv(ctx: StageContext) -> dict:
                            normalised=pv.normalised, threshold=pv.threshold,
                            replace=None if pv.replace == "none" else pv.replace, dt_s=dt, progress=ctx.progress)
     res = analysis.velocity_error(field, flow_from_dict(truth["flow"]))
-    metrics = analysis.velocity_error_summary(res)
+    metrics = null_metrics(analysis.velocity_error_summary(res), {
+        "": f"{res.get('n', 0)} valid PIV vector(s): the volumes hold no correlation peak to measure (see the "
+            f"evaluate stage's Q and the images)"}, where="piv")
     field.info["velocity_error"] = metrics
     field.save(ctx.out / "field.npz")
     write_velocity_error(ctx.out / "velocity_error.npz", res)
@@ -441,12 +499,22 @@ def row(metrics: dict) -> dict:
     return out
 
 
+def fmt_metric(x, spec: str) -> str:
+    """A metric for the headline and report tables: 'n/a' where it has no value."""
+    return "n/a" if x is None else format(x, spec)
+
+
 def headline(m: dict) -> str:
     ev = (m.get("evaluate") or {}).get("frame0", {})
     pv = m.get("piv") or {}
-    return (f"{m['name']}: Q {ev.get('Q', float('nan')):.3f}, particles detected "
-            f"{100 * ev.get('particles', {}).get('detection_rate', float('nan')):.1f} %, PIV RMS error "
-            f"{', '.join(f'{x:.4f}' for x in pv.get('rms_vox', []))} voxels")
+    rate = (ev.get("particles") or {}).get("detection_rate")
+    text = (f"{m['name']}: Q {fmt_metric(ev.get('Q'), '.3f')}, particles detected "
+            f"{fmt_metric(None if rate is None else 100 * rate, '.1f')} %, PIV RMS error "
+            f"{', '.join(fmt_metric(x, '.4f') for x in pv.get('rms_vox') or [])} voxels")
+    why = {**(ev.get("null_reasons") or {}), **(pv.get("null_reasons") or {})}
+    if why:
+        text += f" (no value: {next(iter(why.values()))})"
+    return text
 
 
 KIND = Kind(name="tomo", build_schema=schema, stages=stages, summary=summary, row=row, aliases=("particles",),
