@@ -45,7 +45,7 @@ import numpy as np
 from mitpiv.errors import ConfigError, MitpivWarning, check_positive
 
 __all__ = ["SensorModel", "SensorSetResult", "apply_sensor", "apply_sensor_set", "resolve_exposure", "degenerate_counts",
-           "convolve_psf", "sensor_mean_variance"]
+           "convolve_psf", "sensor_mean_variance", "PointPSFTable", "splat_points"]
 
 _log = logging.getLogger(__name__)
 _BIT_DEPTHS = (8, 10, 12, 14, 16)
@@ -552,3 +552,85 @@ def _jitter_tables(psf: RenderPSF) -> tuple[np.ndarray, int, int]:
     tables, size, levels = psf._build_jitter_tables()
     tables.setflags(write=False)
     return tables, size, levels
+
+
+# ---------------------------------------------------------------------- point images by table splatting
+@dataclass(frozen=True)
+class PointPSFTable:
+    """Pixel-integrated images of a point source at sub-pixel offsets, for splatting.
+
+    ``fine[a, b]`` is the PSF integrated over one whole pixel whose centre lies
+    ``((b - c) / oversample, (a - c) / oversample)`` pixels from the point (``c`` the
+    centre index), so the value of pixel ``(i, j)`` for a point at ``(u, v)`` is
+    ``fine[c + s (j + 0.5 - v), c + s (i + 0.5 - u)]`` (``s = oversample``, rounded to the
+    nearest fine sample: positions are quantised to ``1 / s`` px). Each point's
+    ``window x window`` footprint is renormalised to 1 (the window holds the light, as in a
+    PSF table of the SAPIV aberration study, Table 3.2).
+    """
+
+    fine: np.ndarray
+    oversample: int
+    window: int
+
+    @classmethod
+    def build(cls, *, f_number: float, pixel_pitch_um: float, magnification: float | None = None,
+              spherical_waves: float = 0.0, wavelength_nm: float = 532.0, window: int = 5,
+              oversample: int = 15) -> PointPSFTable:
+        """Table of the Fourier-optics PSF (:func:`mitpiv.physics.psf.psf`, circular pupil,
+        Zernike spherical aberration ``spherical_waves`` RMS) integrated over square pixels.
+
+        window : odd footprint side [px]; oversample : odd number of fine samples per pixel.
+        """
+        from scipy.signal import fftconvolve
+
+        from mitpiv.physics.psf import psf
+
+        for name, v in (("window", window), ("oversample", oversample)):
+            if isinstance(v, bool) or int(v) != v or v < 1 or v % 2 == 0:
+                raise ConfigError(f"PointPSFTable: '{name}' must be an odd positive integer, got {v!r}.")
+        s = int(oversample)
+        size = (int(window) + 1) * s + 1
+        pt = psf(f_number=f_number, pixel_pitch_um=pixel_pitch_um / s, wavelength_nm=wavelength_nm,
+                 magnification=magnification, spherical_waves=spherical_waves, size_px=size, normalize="total")
+        fine = fftconvolve(pt, np.ones((s, s)), mode="same")  # integral over a whole pixel
+        fine = np.maximum(fine, 0.0)
+        fine.setflags(write=False)
+        return cls(fine=fine, oversample=s, window=int(window))
+
+    def footprints(self, uv_px) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(i0 (n,), j0 (n,), values (n, window, window)): each point's footprint, whose pixel
+        ``[a, b]`` is image pixel ``(row j0 + a, column i0 + b)``; each footprint sums to 1."""
+        uv = np.asarray(uv_px, dtype=float).reshape(-1, 2)
+        s, h = self.oversample, self.window // 2
+        c = self.fine.shape[0] // 2
+        base = np.floor(uv).astype(np.int64)  # pixel holding the point
+        frac = uv - base - 0.5  # offset from that pixel's centre, in [-0.5, 0.5)
+        d = np.arange(-h, h + 1)
+        ix = c + s * d[None, :] - np.rint(s * frac[:, 0:1]).astype(np.int64)
+        iy = c + s * d[None, :] - np.rint(s * frac[:, 1:2]).astype(np.int64)
+        vals = self.fine[iy[:, :, None], ix[:, None, :]]
+        tot = vals.sum(axis=(1, 2), keepdims=True)
+        vals = vals / np.where(tot > 0, tot, 1.0)
+        return base[:, 0] - h, base[:, 1] - h, vals
+
+
+def splat_points(uv_px, resolution, table: PointPSFTable, *, weights=None, dtype=np.float32) -> np.ndarray:
+    """Image (H, W) of point sources at pixel positions ``uv_px`` (n, 2) (mitpiv convention:
+    pixel ``i`` spans ``[i, i + 1)``), each of total energy ``weights`` (default 1), spread by
+    ``table``; light falling outside the sensor is lost. Points with non-finite positions
+    are skipped."""
+    w, h = (int(v) for v in resolution)
+    uv = np.asarray(uv_px, dtype=float).reshape(-1, 2)
+    wt = np.ones(len(uv)) if weights is None else np.broadcast_to(np.asarray(weights, float), (len(uv),))
+    ok = np.all(np.isfinite(uv), axis=1) & (uv[:, 0] > -table.window) & (uv[:, 0] < w + table.window) \
+        & (uv[:, 1] > -table.window) & (uv[:, 1] < h + table.window)
+    uv, wt = uv[ok], wt[ok]
+    i0, j0, vals = table.footprints(uv)
+    n = table.window
+    cols = i0[:, None, None] + np.arange(n)[None, None, :]
+    rows = j0[:, None, None] + np.arange(n)[None, :, None]
+    cols, rows = np.broadcast_to(cols, vals.shape), np.broadcast_to(rows, vals.shape)
+    inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
+    flat = (rows * w + cols)[inside]
+    img = np.bincount(flat, weights=(vals * wt[:, None, None])[inside], minlength=w * h)
+    return img.reshape(h, w).astype(dtype)

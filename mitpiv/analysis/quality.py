@@ -52,7 +52,8 @@ from scipy.stats import rankdata
 from mitpiv.errors import ConfigError
 from mitpiv.grid import VoxelGrid
 
-__all__ = ["quality_q", "quality_q_zero_mean", "rank_correlation", "plane_snr", "normalised_snr", "truth_volume"]
+__all__ = ["quality_q", "quality_q_zero_mean", "rank_correlation", "plane_snr", "normalised_snr", "snr_from_fits",
+           "truth_volume", "occupancy_volume"]
 
 
 def _pair(rec, truth, what):
@@ -180,6 +181,31 @@ def plane_snr(volume, *, axis: int = 0, reference=None) -> float:
     return normalised_snr(s, ref)
 
 
+def snr_from_fits(peak, mu, sigma) -> float:
+    """SNR of a reconstruction from its planes' histogram fits (eq. 4.3 of the SAPIV study)::
+
+        SNR(V_R) = 1/N sum_j max(I_j) / (mu(I_j) + sigma(I_j))                  (eq. 4.3)
+
+    Parameters
+    ----------
+    peak : (N,) ``max(I_j)`` of each refocused plane ``I_j``.
+    mu, sigma : (N,) mean and standard deviation of the normal fit of each plane's
+        intensity histogram (e.g. :func:`mitpiv.reconstruct.sapiv.noise_normal_fit`, the fit
+        to the noise part that also sets the threshold; :func:`plane_snr` uses the plain
+        mean and standard deviation of the whole plane instead).
+
+    Returns
+    -------
+    float; a plane with ``mu + sigma <= 0`` (all zero) contributes 0.
+    """
+    pk, m, s = (np.asarray(a, dtype=np.float64).ravel() for a in (peak, mu, sigma))
+    if not (pk.shape == m.shape == s.shape) or pk.size == 0:
+        raise ConfigError(f"snr_from_fits: 'peak', 'mu', 'sigma' must be equal-length non-empty arrays, got "
+                          f"{pk.shape}, {m.shape}, {s.shape}.")
+    den = m + s
+    return float(np.mean(np.where(den > 0, pk / np.where(den > 0, den, 1.0), 0.0)))
+
+
 def normalised_snr(snr: float, reference_snr: float) -> float:
     """Normalised SNR (eq. 4.4): ``nSNR = SNR(V_R(D, gamma)) / SNR(V_R(D=0, gamma))``.
 
@@ -264,3 +290,25 @@ def truth_volume(particles, grid: VoxelGrid, sigma_voxels=0.7, *, intensities=No
         keep = val > 0
         out += np.bincount(flat[keep], weights=val[keep], minlength=out.size)
     return out.reshape(grid.shape)
+
+
+def occupancy_volume(particles, grid: VoxelGrid, *, intensities=None) -> np.ndarray:
+    """The true volume of point-like particles: each particle's intensity (default 1) in
+    the voxel holding its centre, zero elsewhere (particles outside the grid are dropped).
+
+    The truth for particles much smaller than a voxel (the SAPIV study: 20 um particles,
+    50 um voxels), where :func:`truth_volume`'s blobs would be wider than the particles.
+
+    Returns
+    -------
+    (n_z, n_y, n_x) float64 volume
+    """
+    if not isinstance(grid, VoxelGrid):
+        raise ConfigError(f"occupancy_volume: 'grid' must be a VoxelGrid, got {type(grid).__name__}.")
+    p = _particle_positions(particles)
+    amp = np.ones(len(p)) if intensities is None else np.broadcast_to(np.asarray(intensities, dtype=float), (len(p),))
+    nz, ny, nx = grid.shape
+    q = np.floor(grid.to_voxel(p) + 0.5).astype(np.int64)  # (i, j, k) of the voxel holding each centre (centres at integers)
+    ok = (q[:, 0] >= 0) & (q[:, 0] < nx) & (q[:, 1] >= 0) & (q[:, 1] < ny) & (q[:, 2] >= 0) & (q[:, 2] < nz)
+    flat = (q[ok, 2] * ny + q[ok, 1]) * nx + q[ok, 0]
+    return np.bincount(flat, weights=amp[ok], minlength=grid.n_voxels).reshape(grid.shape)

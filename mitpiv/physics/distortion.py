@@ -160,6 +160,24 @@ def fold_radius(d: Distortion) -> float:
 def percent_to_k1(percent: float, *, r_max: float) -> float:
     """k1 giving ``percent`` radial distortion at normalised radius ``r_max`` (barrel > 0).
 
+    The percent definition of the SAPIV aberration study (Kubaczyk, MIT S.M. thesis,
+    appendix A): the second-order model maps undistorted to distorted radii ::
+
+        r_d = r_u (1 + K1 r_u^2)                                           (eq. A.3)
+
+    and p percent distortion moves the corner (``r_u = r_max``) to ::
+
+        r_d = r_max (1 - p / 100)                                          (eq. A.4)
+
+    so that ::
+
+        K1 = -p / (100 r_max^2)                                            (eq. A.8)
+
+    (``K1`` is this function's ``k1`` in normalised coordinates when ``r_max`` is too.)
+    The paper's Table 3.1 matches eq. A.3 at the corner (14.14 px for 2 % on a 1000 x 1000
+    image) but its inner columns follow ``p r_n^2 r_max`` instead of eq. A.3's
+    ``p r_n^3 r_max``; tests/studies/test_replicate_sapiv_distortion.py holds both.
+
     Parameters
     ----------
     percent : float
@@ -175,7 +193,8 @@ def percent_to_k1(percent: float, *, r_max: float) -> float:
 
 
 def percent_shift(r_u, percent: float, *, r_max: float):
-    """Closed-form radial shift r_d - r_u of the percent model (negative = inward)."""
+    """Closed-form radial shift ``r_d - r_u = K1 r_u^3 = -p/100 r_u^3 / r_max^2`` of the
+    percent model (eqs. A.3, A.8; negative = inward), in the units of ``r_u`` and ``r_max``."""
     return -float(percent) / 100.0 * np.asarray(r_u, dtype=float) ** 3 / r_max**2
 
 

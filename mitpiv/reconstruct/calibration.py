@@ -176,11 +176,10 @@ def _dlt(px, w):
     tx, tw = norm(px), norm(w)
     xh = (np.column_stack([px, np.ones(len(px))])) @ tx.T
     wh = (np.column_stack([w, np.ones(len(w))])) @ tw.T
-    rows = []
-    for (u, v, _), X in zip(xh, wh, strict=True):
-        rows.append(np.concatenate([np.zeros(4), -X, v * X]))
-        rows.append(np.concatenate([X, np.zeros(4), -u * X]))
-    _, _, vt = np.linalg.svd(np.asarray(rows))
+    z = np.zeros((len(wh), 4))
+    rows = np.concatenate([np.hstack([z, -wh, xh[:, 1:2] * wh]), np.hstack([wh, z, -xh[:, 0:1] * wh])])
+    # thin SVD: the full one builds a (2n x 2n) U, minutes for a few thousand markers
+    _, _, vt = np.linalg.svd(rows, full_matrices=False)
     p = vt[-1].reshape(3, 4)
     return np.linalg.inv(tx) @ p @ tw
 
