@@ -182,7 +182,9 @@ def plane_snr(volume, *, axis: int = 0, reference=None) -> float:
 
 
 def snr_from_fits(peak, mu, sigma) -> float:
-    """SNR of a reconstruction from its planes' histogram fits (eq. 4.3 of the SAPIV study)::
+    """SNR of a reconstruction from its planes' histogram fits (eq. 4.3 of the SAPIV study).
+
+    The equation::
 
         SNR(V_R) = 1/N sum_j max(I_j) / (mu(I_j) + sigma(I_j))                  (eq. 4.3)
 

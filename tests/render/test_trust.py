@@ -258,8 +258,10 @@ def test_a_black_render_warns_and_says_why(tmp_path, case):
     assert not img.any() and words in meta["warnings"][0]
 
 
-def test_a_microlens_array_off_the_sensor_warns(tmp_path):
-    from mitpiv.errors import MitpivWarning
+def test_a_microlens_array_off_the_sensor_is_refused(tmp_path):
+    """An MLA shifted beyond half the sensor put no microlens image on it (a black render);
+    the plenoptic sensor now refuses the offset when the scene loads, naming it."""
+    from mitpiv.errors import ConfigError
 
     write_particles_ply(tmp_path / "particles_0.ply", np.random.default_rng(5).uniform(-0.5, 0.5, (30, 3)), 1.5,
                         proxy_radius_mm=0.005)
@@ -275,5 +277,5 @@ def test_a_microlens_array_off_the_sensor_warns(tmp_path):
             <string name="pixel_format" value="luminance"/><rfilter type="box"/></film></sensor>"""
     (tmp_path / "scene.xml").write_text(particle_scene_xml(
         sensor, integrator='<integrator type="particle_tracer"><integer name="rays_per_particle" value="200"/></integrator>'))
-    with pytest.warns(MitpivWarning, match="no microlens image lies on the sensor"):
+    with pytest.raises(ConfigError, match=r"mla_offset_um.*below half the sensor"):
         render_scene(tmp_path / "scene.xml", out_dir=tmp_path / "out", frames=(0,), progress=False)
