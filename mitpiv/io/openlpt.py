@@ -6,7 +6,7 @@ Checked against ``openlpt`` 2.2.4 (the cp311 manylinux wheel) and the format of 
 ``test/inputs/test_STB``, and the config writer of the GUI, ``gui/views/tracking_settings_view.py``).
 
 Folder written by :func:`export_openlpt`
----------------------------------------
+----------------------------------------
 ``config.txt``
     the main config: frame range, frame rate, threads, camera files with their maximum
     intensity, image lists, view volume, voxel size, output folder, object type

@@ -38,7 +38,7 @@ OpenPTV's camera model, and mitpiv's in it
   :data:`MAX_FIT_PX` is refused.
 
 Folder written by :func:`export_openptv` (pyptv's layout, as in liboptv's ``test_cavity``)
------------------------------------------------------------------------------------------
+------------------------------------------------------------------------------------------
 ``parameters/`` ``ptv.par`` (cameras, image size, pitch, media), ``sequence.par`` (image
 base names, first and last frame), ``criteria.par`` (observed volume, correspondence
 tolerances), ``track.par`` (velocity bounds per frame, angle and acceleration limits),
@@ -86,16 +86,32 @@ FIT_GRID = 41
 class OpenPTVSettings:
     """The processing settings written to the parameter folder (OpenPTV's names and units).
 
-    gray_threshold : target recognition threshold per camera, in image counts (of
-        ``2**bits - 1``; liboptv reads four values).
-    min_pixels, max_pixels : pixels per target (total); min_sum_gray : least grey sum.
-    discontinuity : largest grey-value step inside a target; cross_size : marker size [px].
-    eps0_mm : epipolar band half-width on the sensor [mm]; corrmin : least correspondence
-        quality; cn, cnx, cny, csumg : relative tolerances of target size and brightness.
-    max_displacement_mm : tracking bounds ``dv*min / dv*max`` [mm per frame] (None: a
-        tenth of the volume's smallest side).
-    angle_deg, acceleration : tracking limits (OpenPTV's ``dangle``, ``dacc`` [mm]).
-    add_particles : OpenPTV's ``add`` flag (search for unused targets while tracking).
+    Attributes
+    ----------
+    gray_threshold : float
+        Target recognition threshold per camera, in counts of an 8-bit image (scaled for
+        16 bits; liboptv reads four values).
+    min_pixels, max_pixels : int
+        Pixels per target (total).
+    min_sum_gray : int
+        Least grey-value sum of a target.
+    discontinuity : int
+        Largest grey-value step inside a target.
+    cross_size : int
+        Marker size [px].
+    eps0_mm : float
+        Epipolar band half-width on the sensor [mm].
+    corrmin : float
+        Least correspondence quality.
+    cn, cnx, cny, csumg : float
+        Relative tolerances of target size and brightness.
+    max_displacement_mm : float or None
+        Tracking bounds ``dv*min / dv*max`` [mm per frame] (None: a tenth of the volume's
+        smallest side).
+    angle_deg, acceleration : float
+        Tracking limits (OpenPTV's ``dangle`` [deg] and ``dacc`` [mm]).
+    add_particles : bool
+        OpenPTV's ``add`` flag (search for unused targets while tracking).
     """
 
     gray_threshold: float = 30.0
