@@ -18,21 +18,25 @@ OpenPTV's camera model, and mitpiv's in it
   ``omega = atan2(-dm12, dm22)``, ``kappa = atan2(-dm01, dm00)``).
 - Interior (``.ori``): ``xh, yh`` [mm] the principal point's offset from the sensor centre
   (y up) and ``cc`` the principal distance [mm]: ``cc = focal_length_mm``,
-  ``xh = (cx - 0.5 - W/2) pitch``, ``yh = (H/2 - cy + 0.5) pitch`` (``cx, cy`` mitpiv's
-  principal point [px]).
+  ``xh = (cx - W/2) pitch``, ``yh = (H/2 - cy) pitch`` (``cx, cy`` mitpiv's principal
+  point [px]).
 - Glass vector (``.ori``, last line): the multimedia interface; the export is in air (all
   refractive indices 1 in ``ptv.par``), where liboptv's refraction step is the identity and
   the vector only has to be non-zero: half the way from the world origin to the camera.
 - Pixels (``ptv.par``: one image size and pixel pitch for all cameras): ``x_pix = x/pitch +
-  W/2``, ``y_pix = H/2 - y/pitch``; OpenPTV's target centroids put pixel centres on integers,
-  so ``(x_pix, y_pix) = (u - 0.5, v - 0.5)`` for mitpiv's ``(u, v)``.
+  W/2``, ``y_pix = H/2 - y/pitch``. OpenPTV's pixel coordinates are mitpiv's: its target
+  recognition (``targ_rec`` and ``peak_fit`` in ``segmentation.c``) adds 0.5 to the
+  grey-weighted pixel index, so pixel ``i`` spans ``[i, i + 1)`` as in mitpiv, and
+  ``(x_pix, y_pix) = (u, v)`` (checked with optv 0.3.2 on exported images: its targets'
+  mean offset from mitpiv's projections is below 0.03 px, where a half-pixel convention
+  error would show as 0.5 px).
 - Distortion (``.addpar``: ``k1 k2 k3 p1 p2 scx she``) acts on metric coordinates measured
   from the *sensor centre* (after adding ``xh, yh``), with y up and OpenPTV's tangential terms
   (``x += p1 (r2 + 2 x^2) + 2 p2 x y``). For a principal point on OpenPTV's sensor centre
   (``xh = yh = 0``) mitpiv's Brown-Conrady lens converts exactly: ``k1/cc^2, k2/cc^4,
-  k3/cc^6``, ``p1_ptv = p2/cc``, ``p2_ptv = -p1/cc``. Otherwise (mitpiv's default principal
-  point ``W/2`` is 0.5 px off OpenPTV's centre ``W/2 + 0.5``) the two distortion centres
-  differ and no exact conversion exists: the exporter fits the five coefficients by linear
+  k3/cc^6``, ``p1_ptv = p2/cc``, ``p2_ptv = -p1/cc``; mitpiv's default principal point (the
+  sensor centre) is this case. Otherwise the two distortion centres differ and no exact
+  conversion exists: the exporter fits the five coefficients by linear
   least squares to mitpiv's projection on a 41 x 41 grid over the sensor and records the
   largest remaining difference (``distortion_fit_px``) in the manifest; a fit worse than
   :data:`MAX_FIT_PX` is refused.
@@ -182,7 +186,7 @@ def _fit_distortion(camera, xh: float, yh: float, cc: float, pitch_mm: float):
     xn, yn = undistort((uu.ravel() - cx) / f, (vv.ravel() - cy) / f, camera.distortion, iterations=50)
     xd, yd = distort(xn, yn, camera.distortion)
     u, v = f * xd + cx, f * yd + cy
-    tx, ty = (u - 0.5 - w / 2) * pitch_mm, (h / 2 - (v - 0.5)) * pitch_mm  # targets: OpenPTV metric, distorted
+    tx, ty = (u - w / 2) * pitch_mm, (h / 2 - v) * pitch_mm  # targets: OpenPTV metric, distorted
     sx, sy = cc * xn + xh, -cc * yn + yh  # flat, from the sensor centre
     r2 = sx * sx + sy * sy
     ax = np.stack([sx * r2, sx * r2**2, sx * r2**3, r2 + 2 * sx * sx, 2 * sx * sy], axis=1)
@@ -225,7 +229,7 @@ def openptv_calibration(camera, *, max_fit_px: float = MAX_FIT_PX) -> dict:
     pitch = cam.pixel_pitch_um * 1e-3
     cx, cy = cam.principal_point_px
     cc = float(cam.focal_length_mm)
-    xh, yh = (cx - 0.5 - w / 2) * pitch, (h / 2 - cy + 0.5) * pitch
+    xh, yh = (cx - w / 2) * pitch, (h / 2 - cy) * pitch
     d = cam.distortion
     if d.is_zero:
         ap, kind, fit = [0.0] * 5, "none", 0.0
@@ -239,7 +243,7 @@ def openptv_calibration(camera, *, max_fit_px: float = MAX_FIT_PX) -> dict:
                               f"camera's principal point is ({cx:g}, {cy:g}) px, {np.hypot(xh, yh) / pitch:.3g} px "
                               f"off it; the best OpenPTV distortion differs from the lens ({d}) by up to {fit:.3g} "
                               f"px on the sensor (limit max_fit_px = {max_fit_px:g}). Use a principal point at "
-                              f"({w / 2 + 0.5:g}, {h / 2 + 0.5:g}) px, a weaker distortion, or a larger max_fit_px.")
+                              f"({w / 2:g}, {h / 2:g}) px (the sensor centre), a weaker distortion, or a larger max_fit_px.")
     glass = 0.5 * pos if np.linalg.norm(pos) > 0 else -R[2]  # any non-zero vector in air
     return {"position_mm": pos.tolist(), "angles_rad": [omega, phi, kappa], "dm": dm_back.tolist(),
             "xh_mm": xh, "yh_mm": yh, "cc_mm": cc, "glass_mm": glass.tolist(),
@@ -406,7 +410,7 @@ def export_openptv(out_dir, images, cameras, *, lower_mm, upper_mm, first_frame:
         "first_frame": first_frame, "last_frame": last, "lower_mm": lo.tolist(), "upper_mm": hi.tolist(),
         "bits": bits, "gain": gain,
         "scaling": f"value = round(clip(image * gain, 0, {2**bits - 1})), one gain for all cameras and frames",
-        "pixel_convention": "OpenPTV pixel centres at integers: x_pix = u_mitpiv - 0.5",
+        "pixel_convention": "OpenPTV pixel i spans [i, i + 1) as in mitpiv: x_pix = u_mitpiv",
         "calibrations": cals, "cameras": [c.to_dict() for c in cams] if all(hasattr(c, "to_dict") for c in cams)
         else None, "settings": asdict(settings),
     }
