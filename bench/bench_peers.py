@@ -16,7 +16,7 @@ exactly as ``mitpiv export RUN --openlpt/--openptv`` would write a rendered run'
   point positions on frame 0 of the export, read with optv's own parameter and
   orientation readers; scored with :func:`mitpiv.tracking.metrics.particle_metrics`.
 
-``python bench/bench_peers.py [--particles 200] [--frames 10] [--distortion] [--out DIR]``
+``python bench/bench_peers.py [--particles 200] [--frames 10] [--distortion [--undistort]] [--out DIR]``
 (about 30 s for the defaults on 2 cores). Prints one row per method.
 """
 
@@ -73,12 +73,12 @@ def summary(name, m, wall):
     return row
 
 
-def run_openlpt(folder, truth, images, cams):
+def run_openlpt(folder, truth, images, cams, undistort=False):
     from mitpiv.tracking.peers import run_openlpt as run
 
     export_openlpt(folder, images, cams, lower_mm=LOWER, upper_mm=UPPER, frame_rate_hz=1 / DT_S, voxel_mm=0.02,
                    settings=OpenLPTSettings(search_radius_vox=30, tolerance_3d_vox=2.5, neighbour_spacing_vox=150,
-                                            pred_search_vox=40))
+                                            pred_search_vox=40), undistort=undistort)
     tracks, wall = run(folder)
     v = np.broadcast_to(VELOCITY_MM_FRAME / DT_S, truth.shape)
     m = track_metrics(tracks, truth, radius_mm=RADIUS_MM, truth_velocities_mm_s=v, cameras=cams)
@@ -147,6 +147,7 @@ def main(argv=None):
     ap.add_argument("--frames", type=int, default=10)
     ap.add_argument("--distortion", action="store_true", help="a 2 %% barrel lens on every camera")
     ap.add_argument("--out", default=None, help="keep the exports and results.json here")
+    ap.add_argument("--undistort", action="store_true", help="OpenLPT: export undistorted frames and cameras")
     ap.add_argument("--methods", default="mitpiv,openlpt,openptv", help="comma-separated subset to run")
     a = ap.parse_args(argv)
     cams = cameras(Distortion(k1=-0.02 / 0.0512**2 / 2) if a.distortion else Distortion())
@@ -160,7 +161,8 @@ def main(argv=None):
         if name not in methods:
             continue
         try:
-            rows.append(fn(out / name, truth, images, cams))
+            kw = {"undistort": a.undistort} if name == "openlpt" else {}
+            rows.append(fn(out / name, truth, images, cams, **kw))
         except Exception as e:  # a peer that cannot run is a result too: record why
             print(f"{name}: could not run: {type(e).__name__}: {e}")
             rows.append({"method": name, "error": f"{type(e).__name__}: {e}"})

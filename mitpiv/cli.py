@@ -584,7 +584,8 @@ def cmd_export(args) -> int:
 
         for tool, out in (("openlpt", args.openlpt), ("openptv", args.openptv)):
             if out:
-                m = export_tracker_inputs(args.run, out, tool=tool, progress=_progress(args))
+                opts = {"undistort": True} if tool == "openlpt" and args.undistort else {}
+                m = export_tracker_inputs(args.run, out, tool=tool, progress=_progress(args), **opts)
                 print(f"{tool}: {m['n_cameras']} cameras x {m['n_frames']} frames ({m['source']} images, "
                       f"{m['bits']}-bit, gain {m['gain']:.6g}) -> {out}")
         if not args.vtk:
@@ -792,6 +793,8 @@ def main(argv=None) -> int:
     ex.add_argument("--out", default=None, help="output folder (default RUN/vtk)")
     ex.add_argument("--openlpt", default=None, metavar="DIR", help="OpenLPT STB inputs (config, camera files, TIFFs)")
     ex.add_argument("--openptv", default=None, metavar="DIR", help="OpenPTV inputs (parameters, .ori/.addpar, TIFFs)")
+    ex.add_argument("--undistort", action="store_true", help="--openlpt: resample distorted cameras' frames to "
+                    "undistorted pinhole images (openlpt 2.2.4 cannot stereo-match distorted cameras)")
     ex.set_defaults(func=cmd_export)
     b = sub.add_parser("bench", help="benchmarks: 'accuracy-time' measures every accuracy knob's time and error")
     b.add_argument("which", choices=["accuracy-time"], help="the benchmark to run")
