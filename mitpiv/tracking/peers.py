@@ -19,7 +19,8 @@ Observed with openlpt 2.2.4 (bench/bench_peers.py: 4 cameras 512 x 512 px, 200 p
 ghost fraction 0.0005, position error 0.005 mm = 0.026 px, velocity error 1.3 % of the speed,
 99.5 % correct tracks, 6 - 8 s on one thread; its 3-D positions are unbiased (1e-4 mm against
 0.045 mm for a half-pixel convention error), which checks the export's pixel convention. On
-distorted camera files its stereo matching fails (see :mod:`mitpiv.io.openlpt`).
+distorted camera files its stereo matching fails (see :mod:`mitpiv.io.openlpt`); with a 2 %
+barrel lens exported with ``undistort=True`` it reaches yield 0.961, no ghosts, 0.032 px.
 """
 
 from __future__ import annotations
