@@ -399,7 +399,12 @@ def run(ctx) -> ReplicationResult:
         ax.set_xlabel(c.x_label)
         ax.set_ylabel(c.y_label)
         ax.set_title(title, fontsize=9)
-        ax.legend(fontsize=7)
+        if key.startswith("Q_vs_density_threshold"):  # many crossing lines: the legend beside the axes
+            ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))
+            fig.set_size_inches(6.8, 4)
+            fig.tight_layout()
+        else:
+            ax.legend(fontsize=7)
         figures.append(ctx.figure(fig, fname))
         plt.close(fig)
     # ------------------------------------------------------------------ sections
