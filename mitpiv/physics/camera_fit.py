@@ -381,7 +381,8 @@ def camera_from_polynomial(coefficients, *, terms=SOLOFF_TERMS, centre_mm=(0.0, 
     if volume_mm is None:
         raise ConfigError(f"camera {name!r}: a polynomial calibration is valid only inside the volume it was made "
                           f"in; give volume_mm = (x_min, x_max, y_min, y_max, z_min, z_max) [mm] (the calibration "
-                          f"volume) to fit a renderable camera to it.")
+                          f"volume: a '# volume_mm = ...' line in the table, the sensor property "
+                          f"'calibration_volume_mm' or the volume_mm argument) to fit a renderable camera to it.")
     terms = _check_terms(terms, name)
     c = np.asarray(coefficients, dtype=np.float64)
     if c.shape != (2, len(terms)) or not np.all(np.isfinite(c)):

@@ -369,3 +369,32 @@ def test_tables_drive_the_renderer(tmp_path, capsys):
     assert main(["render", str(xml), "--out", str(out), "--frames", "0"]) != 0
     assert "holds 3 camera(s) (cam0, cam1, cam2), none named 'cam3'" in capsys.readouterr().err
     assert not out.exists() or not any(out.rglob("*"))
+    # a $name the scene does not use is named in the error (Mitsuba lists it on a second line)
+    xml.write_text(xml.read_text().replace('<default name="frame" value="0"/>',
+                                           '<default name="frame" value="0"/><default name="distance_mm" value="1"/>'))
+    assert main(["render", str(xml), "--out", str(out), "--frames", "0"]) != 0
+    assert "parameters $distance_mm=1 are not used by the scene XML" in capsys.readouterr().err
+
+
+def test_reconstruction_maps_through_the_table(tmp_path):
+    """reconstruct_images with a table's mappings (what `mitpiv reconstruct --calibration`
+    passes) equals reconstruct_volume through the same mappings, whatever cameras the
+    metadata holds; a table with fewer cameras than images is refused."""
+    from mitpiv.grid import VoxelGrid
+    from mitpiv.reconstruct.images import reconstruct_images
+    from mitpiv.reconstruct.mapping import mappings_from_calibration
+    from mitpiv.reconstruct.tomo import reconstruct_volume
+
+    cams = [PinholeCamera((64, 48), 60.0, 65.0, rotation=known_krt(i)[1], position_mm=-known_krt(i)[1].T @ known_krt(i)[2])
+            for i in range(3)]
+    f = write_polynomial_table(tmp_path / "poly.csv", cams, volume_mm=VOLUME)
+    maps = mappings_from_calibration(f)
+    images = [np.random.default_rng(i).random((48, 64)).astype(np.float32) for i in range(3)]
+    metas = [{"camera": PinholeCamera((64, 48), 50.0, 65.0).to_dict()} for _ in range(3)]  # wrong on purpose
+    grid = VoxelGrid.from_bounds((-10, -8, -4), (10, 8, 4), 1.0)
+    got, _ = reconstruct_images(images, metas, grid, "mlos", mappings=maps)
+    want, _ = reconstruct_volume(images, maps, grid, "mlos")
+    assert np.count_nonzero(got) > 0.5 * got.size  # the cameras see the volume
+    np.testing.assert_array_equal(got, want)
+    with pytest.raises(ConfigError, match=r"2 camera mapping\(s\) for 3 image\(s\)"):
+        reconstruct_images(images, metas, grid, "mlos", mappings=maps[:2])

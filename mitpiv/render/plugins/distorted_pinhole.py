@@ -167,6 +167,7 @@ the scene asks for it.
 
 from __future__ import annotations
 
+import logging
 import math
 
 import drjit as dr
@@ -299,6 +300,9 @@ class DistortedPinhole(MitpivSensor):
                 cam, self.calibration_info = read_dlt_cameras(path, volume_mm=volume, **kw)
             else:
                 cam, self.calibration_info = read_polynomial_cameras(path, volume_mm=volume, **kw)
+            res = self.calibration_info.get("max_px", self.calibration_info.get("max_residual_px"))
+            logging.getLogger(__name__).info("distorted_pinhole: camera %r of the %s table %s, renderable within %.3g px",
+                                             rec["name"], fmt, calibration, res)
         else:
             extra = [k for k, v in (("calibration_camera", which), ("calibration_volume_mm", vol),
                                     ("calibration_max_residual_px", max_res)) if v is not None]
