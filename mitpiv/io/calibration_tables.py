@@ -137,8 +137,8 @@ def _read_csv(path: Path, src: str):
             continue
         if s.startswith("#"):
             m = re.match(r"#\s*([A-Za-z_]+)\s*[=:]\s*(.+)$", s)
-            if m and m.group(1).lower() in _SETTINGS:
-                settings[m.group(1).lower()] = _settings_value(m.group(1).lower(), m.group(2), src)
+            if m and m.group(1).lower() in _SETTINGS:  # a value may end in its own "# comment"
+                settings[m.group(1).lower()] = _settings_value(m.group(1).lower(), m.group(2).split("#")[0], src)
             continue
         lines.append(ln)
     rows = list(csv.reader(lines, skipinitialspace=True))

@@ -92,7 +92,7 @@ def test_dlt_conventions_and_projection_matrix(tmp_path):
     k, r, t = known_krt(1)
     want = PinholeCamera(SIZE, 60.0, PITCH_UM, rotation=r, position_mm=-r.T @ t, principal_point_px=(k[0, 2], k[1, 2]))
     L_m = dlt_of(k, r, t / 1000.0, first_pixel_centre=1.0)  # world in metres: X / 1000, so t / 1000
-    f = write_dlt_csv(tmp_path / "m.csv", [("a", L_m)], "# length_unit_mm = 1000\n# first_pixel_centre_px = 1\n")
+    f = write_dlt_csv(tmp_path / "m.csv", [("a", L_m)], "# length_unit_mm = 1000  # metres\n# first_pixel_centre_px = 1\n")
     cam, _ = read_dlt_cameras(f, camera=0, pixel_pitch_um=PITCH_UM, resolution=SIZE)
     np.testing.assert_allclose(cam.project(POINTS), want.project(POINTS), atol=1e-8)
     p = -3.7 * (k @ np.hstack([r, t.reshape(3, 1)]))  # mitpiv pixels: first centre at 0.5
