@@ -380,6 +380,13 @@ def cmd_reconstruct(args) -> int:
     grid = _grid_from_args(args)
     truth = _check_truth_frame(args.truth, args.frame) if args.truth else None
     images, metas = _reconstruct_inputs(args.images)
+    mappings = None
+    if args.calibration:  # a user's calibration instead of the true cameras of the metadata
+        from mitpiv.reconstruct.mapping import mappings_from_calibration
+
+        ids = [m.get("sensor_id") for m in metas]
+        mappings = mappings_from_calibration(args.calibration, names=ids if all(ids) else None,
+                                             resolution=images[0].shape[::-1])
     costs.check_memory(costs.reconstruction_cost(grid.n_voxels, n_images=len(images), iterations=args.iterations,
                                                  method=args.method),
                        what=f"reconstruct: --voxel-mm {args.voxel_mm} on --bounds {' '.join(map(str, args.bounds))}",
@@ -391,7 +398,7 @@ def cmd_reconstruct(args) -> int:
                                    mu=args.mu, weights=args.weights, interpolation=args.interpolation,
                                    preprocess=args.preprocess, combine=args.combine,
                                    threshold_k=None if args.threshold_k < 0 else args.threshold_k,
-                                   rays_per_pixel=args.rays_per_pixel, progress=_progress(args))
+                                   rays_per_pixel=args.rays_per_pixel, progress=_progress(args), mappings=mappings)
     elapsed = time.perf_counter() - t0
     metrics = {}
     if truth is not None:
@@ -739,6 +746,8 @@ def main(argv=None) -> int:
     c.add_argument("--rays-per-pixel", type=_int_in(1, 4096), default=16, help="drt-mart ray bundle per pixel")
     c.add_argument("--truth", default=None, help="truth .npz: print Q, Q*, Q' and SNR")
     c.add_argument("--frame", type=_int_in(0), default=0, help="truth frame of the images")
+    c.add_argument("--calibration", default=None, help="DLT / polynomial table (.csv, .json): map through it, not the "
+                   "metadata's cameras (cameras by the images' sensor ids)")
     c.set_defaults(func=cmd_reconstruct)
     e = sub.add_parser("evaluate", help="find particles in a reconstructed volume, match them to the truth, print errors")
     e.add_argument("volume", help="volume .npz from 'mitpiv reconstruct'")

@@ -13,8 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from mitpiv.errors import CalibrationError, ConfigError
-from mitpiv.physics.camera import PinholeCamera
-from mitpiv.physics.distortion import Distortion
+from mitpiv.physics.camera_fit import decompose_projection, dlt_matrix, fit_pinhole_camera
 from mitpiv.reconstruct.mapping import SOLOFF_TERMS, CameraMapping, PinholeMapping, PolynomialMapping
 
 __all__ = [
@@ -163,39 +162,10 @@ def _check_points(pixels, world, resolution):
     return px, w
 
 
-def _dlt(px, w):
-    """Normalised direct linear transform: 3x4 P with x ~ P X."""
-    def norm(a):
-        c = a.mean(axis=0)
-        s = np.sqrt(a.shape[1]) / np.mean(np.linalg.norm(a - c, axis=1))
-        t = np.eye(a.shape[1] + 1)
-        t[:-1, :-1] *= s
-        t[:-1, -1] = -s * c
-        return t
-
-    tx, tw = norm(px), norm(w)
-    xh = (np.column_stack([px, np.ones(len(px))])) @ tx.T
-    wh = (np.column_stack([w, np.ones(len(w))])) @ tw.T
-    z = np.zeros((len(wh), 4))
-    rows = np.concatenate([np.hstack([z, -wh, xh[:, 1:2] * wh]), np.hstack([wh, z, -xh[:, 0:1] * wh])])
-    # thin SVD: the full one builds a (2n x 2n) U, minutes for a few thousand markers
-    _, _, vt = np.linalg.svd(rows, full_matrices=False)
-    p = vt[-1].reshape(3, 4)
-    return np.linalg.inv(tx) @ p @ tw
-
-
-def _decompose(p):
-    from scipy.linalg import rq
-
-    m = p[:, :3]
-    if np.linalg.det(m) < 0:
-        p = -p
-        m = -m
-    k, r = rq(m)
-    d = np.diag(np.sign(np.diag(k)))
-    k, r = k @ d, d @ r
-    t = np.linalg.solve(k, p[:, 3])
-    return k / k[2, 2], r, t
+# the fits live in mitpiv.physics.camera_fit (the renderer turns user calibrations into cameras
+# with them too); the private names stay for scripts that used them
+_dlt = dlt_matrix
+_decompose = decompose_projection
 
 
 def calibrate(
@@ -259,61 +229,16 @@ def calibrate(
 
 
 def _fit_pinhole(px, w, resolution, distortion, pitch):
-    import cv2
-
     if resolution is None:
         raise ConfigError("calibrate: the pinhole model needs 'resolution' (width, height).")
     if distortion not in _DISTORTION_MODELS:
         raise ConfigError(f"calibrate: parameter 'distortion' must be one of {_DISTORTION_MODELS}, got {distortion!r}.")
-    n_par = 10 + {"none": 0, "radial": 2, "brown": 5}[distortion]
-    if len(px) < max(2 * n_par, 12):
-        raise CalibrationError(
-            f"calibrate: a pinhole fit with distortion '{distortion}' ({n_par} parameters) needs at least "
-            f"{max(2 * n_par, 12)} markers, got {len(px)}."
-        )
-    s = np.linalg.svd(w - w.mean(axis=0), compute_uv=False)  # spread of the markers per principal axis
-    s0 = float(s[0])
-    if s0 == 0 or s[1] < 1e-6 * s0:
-        raise CalibrationError("calibrate: the markers are collinear (or coincide); a camera cannot be fitted.")
-    if s[2] < 1e-3 * s0:
-        raise CalibrationError(
-            "calibrate: all markers lie in one plane; a pinhole fit from one view needs the target at "
-            ">= 2 depths or tilts (non-coplanar markers)."
-        )
-    k, r, t = _dlt_start(px, w)
-    f0 = 0.5 * (k[0, 0] + k[1, 1])
-    k0 = np.array([[f0, 0, k[0, 2] - 0.5], [0, f0, k[1, 2] - 0.5], [0, 0, 1.0]])
-    flags = cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_ASPECT_RATIO
-    if distortion == "none":
-        flags |= cv2.CALIB_FIX_K1 | cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST
-    elif distortion == "radial":
-        flags |= cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST
-    rvec0, _ = cv2.Rodrigues(r)
-    obj = [w.astype(np.float32)]
-    img = [(px - 0.5).astype(np.float32).reshape(-1, 1, 2)]
-    flags |= getattr(cv2, "CALIB_USE_EXTRINSIC_GUESS", 0)  # start from the DLT pose where OpenCV allows it
-    crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 500, 1e-15)
-    try:
-        _, kk, dist, rvecs, tvecs = cv2.calibrateCamera(
-            obj, img, tuple(int(v) for v in resolution), k0, np.zeros(5), [rvec0], [t.reshape(3, 1)],
-            flags=flags, criteria=crit)
-    except cv2.error as e:
-        raise CalibrationError(f"calibrate: OpenCV's calibrateCamera failed: {str(e).strip().splitlines()[-1]}") from None
-    rot, _ = cv2.Rodrigues(rvecs[0])
-    d = np.asarray(dist, dtype=float).ravel()
-    d = np.concatenate([d, np.zeros(max(0, 5 - d.size))])
-    cam = PinholeCamera(
-        tuple(int(v) for v in resolution), float(kk[0, 0]) * pitch * 1e-3, pitch, rotation=rot,
-        position_mm=-rot.T @ np.asarray(tvecs[0], float).ravel(),
-        principal_point_px=(float(kk[0, 2]) + 0.5, float(kk[1, 2]) + 0.5),
-        distortion=Distortion(k1=d[0], k2=d[1], p1=d[2], p2=d[3], k3=d[4]),
-    )
-    return PinholeMapping(cam), {"model": "pinhole", "distortion": distortion, "dlt_focal_px": float(f0)}
+    cam, info = fit_pinhole_camera(px, w, resolution=resolution, distortion=distortion, pixel_pitch_um=pitch)
+    return PinholeMapping(cam), info
 
 
 def _dlt_start(px, w):
-    p = _dlt(px, w)
-    k, r, t = _decompose(p)
+    k, r, t = _decompose(_dlt(px, w))
     # _decompose fixes det(M) > 0; markers still behind the camera mean wrong labels.
     if np.mean((w @ r.T + t)[:, 2]) < 0:
         raise CalibrationError("calibrate: the linear start puts the markers behind the camera; check the labels.")

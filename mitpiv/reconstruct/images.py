@@ -19,7 +19,7 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
                        mu: float = 1.0, weights: str = "circle", interpolation: str = "linear",
                        preprocess: float | None = None, combine: str = "multiplicative", threshold_k: float | None = 3.0,
                        rays_per_pixel: int = 16, fuse_normalise: str = "histogram",
-                       progress: Progress = None, cache=None) -> tuple[np.ndarray, dict]:
+                       progress: Progress = None, cache=None, mappings=None) -> tuple[np.ndarray, dict]:
     """Reconstruct a volume from the images of one frame and their EXR metadata.
 
     method : one of :data:`RECONSTRUCT_METHODS`. "plenoptic": each raw image decoded (its
@@ -31,6 +31,10 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
         Passed to the method (planes, iterations); see :mod:`mitpiv.progress`.
     cache : :class:`~mitpiv.reconstruct.tomo.WeightCache`, optional
         MART/SMART weights shared by the frames of one experiment (same cameras and grid).
+    mappings : list of CameraMapping, optional
+        Tomographic methods: one mapping per image (e.g. a user's calibration,
+        :func:`~mitpiv.reconstruct.mapping.mappings_from_calibration`) instead of the true
+        cameras of the metadata.
 
     Returns (volume, info).
     """
@@ -42,7 +46,13 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
             if (m.get("camera") or {}).get("type") == "plenoptic":
                 raise ConfigError(f"reconstruct: image {k} comes from a plenoptic camera; method {method!r} needs "
                                   f"pinhole cameras. Use method 'plenoptic' or 'drt-mart'.")
-            maps.append(mapping_from_metadata(m))
+            if mappings is None:
+                maps.append(mapping_from_metadata(m))
+        if mappings is not None:
+            if len(mappings) != len(images):
+                raise ConfigError(f"reconstruct: {len(mappings)} camera mapping(s) for {len(images)} image(s); give one "
+                                  f"calibration per image.")
+            maps = list(mappings)
         return reconstruct_volume(images, maps, grid, method, iterations=iterations, mu=mu, weights=weights,
                                   interpolation=interpolation, preprocess=preprocess, combine=combine,
                                   threshold_k=threshold_k, progress=progress, cache=cache)

@@ -10,7 +10,8 @@ and on the sensor), ``jacobian(p_world) -> (..., 2, 3)`` = d(pixel)/d(world), an
   true model from EXR metadata (:func:`mapping_from_metadata`, "perfect calibration") or
   one fitted by :func:`mitpiv.reconstruct.calibrate`; every method is the camera's own.
 - :class:`PolynomialMapping`: Soloff's polynomial, cubic in x and y and quadratic in z (19
-  terms per image coordinate), fitted by least squares on normalised coordinates.
+  terms per image coordinate; or the full cubic, 20 terms), fitted by least squares on
+  normalised coordinates, or a user's table (:func:`mitpiv.io.read_polynomial_table`).
 """
 
 from __future__ import annotations
@@ -21,11 +22,11 @@ import numpy as np
 
 from mitpiv.errors import ConfigError
 from mitpiv.physics.camera import PinholeCamera, on_sensor
+from mitpiv.physics.camera_fit import CUBIC_TERMS, SOLOFF_TERMS, monomials
 
-__all__ = ["CameraMapping", "PinholeMapping", "PolynomialMapping", "mapping_from_metadata", "SOLOFF_TERMS"]
+__all__ = ["CameraMapping", "PinholeMapping", "PolynomialMapping", "mapping_from_metadata", "mappings_from_calibration",
+           "SOLOFF_TERMS"]
 
-#: exponents (i, j, k) of x^i y^j z^k in Soloff's polynomial: i + j <= 3, k <= 2, i + j + k <= 3
-SOLOFF_TERMS = tuple((i, j, k) for k in range(3) for n in range(4 - k) for i in range(n, -1, -1) for j in [n - i])
 
 
 class CameraMapping(ABC):
@@ -138,19 +139,74 @@ def mapping_from_metadata(meta: dict) -> PinholeMapping:
     return PinholeMapping(camera)
 
 
-class PolynomialMapping(CameraMapping):
-    """Soloff polynomial mapping (19 terms per image coordinate) on normalised coordinates."""
+def mappings_from_calibration(path, *, names=None, resolution=None, pixel_pitch_um: float | None = None,
+                              max_residual_px: float | None = None) -> list[CameraMapping]:
+    """Reconstruction mappings from a user's calibration table (:mod:`mitpiv.io.calibration_tables`).
 
-    def __init__(self, coefficients, centre_mm, scale_mm, resolution=None):
-        self.coefficients = np.asarray(coefficients, dtype=float).reshape(2, len(SOLOFF_TERMS))
+    A polynomial table gives :class:`PolynomialMapping` s (the polynomial itself, no
+    approximation); a DLT table :class:`PinholeMapping` s (the DLT as a square-pixel camera,
+    refused beyond ``max_residual_px``); an OpenCV file one :class:`PinholeMapping`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The calibration file.
+    names : list of str, optional
+        The cameras to take, in this order (e.g. the images' ``sensor_id`` s); default every
+        camera of the table in its order.
+    resolution, pixel_pitch_um : optional
+        Image size [px] and pixel pitch [um] where the file does not hold them (a DLT's
+        camera needs both; a polynomial needs neither).
+    max_residual_px : float, optional
+        DLT only: see :func:`mitpiv.io.read_dlt_cameras`.
+    """
+    from mitpiv.io.calibration_tables import (
+        calibration_table_format,
+        read_dlt_cameras,
+        read_dlt_table,
+        read_polynomial_table,
+        select_camera,
+    )
+    from mitpiv.io.opencv import read_opencv_camera
+
+    fmt = calibration_table_format(path)
+    if fmt is None:
+        raise ConfigError(f"mappings_from_calibration: {str(path)!r} is not a calibration file mitpiv reads (OpenCV "
+                          f".yml / .xml / .json, or a DLT or polynomial table .csv / .json).")
+    if fmt == "opencv":
+        return [PinholeMapping(read_opencv_camera(path, pixel_pitch_um=pixel_pitch_um or 10.0, resolution=resolution,
+                                                  pose="require"))]
+    records = (read_dlt_table if fmt == "dlt" else read_polynomial_table)(path)[0]
+    chosen = records if names is None else [select_camera(records, n, path=path) for n in names]
+    if fmt == "polynomial":
+        return [PolynomialMapping(r["coefficients"], r["centre_mm"], r["scale_mm"],
+                                  resolution or ((r["image_width"], r["image_height"]) if r.get("image_width") else None),
+                                  terms=r["terms"]) for r in chosen]
+    kw = {} if max_residual_px is None else {"max_residual_px": max_residual_px}
+    return [PinholeMapping(read_dlt_cameras(path, camera=r["name"], resolution=resolution,
+                                            pixel_pitch_um=pixel_pitch_um or 10.0, **kw)[0]) for r in chosen]
+
+
+class PolynomialMapping(CameraMapping):
+    """Soloff polynomial mapping on normalised coordinates ``q = (p - centre) / scale``:
+    ``(u, v) = coefficients @ monomials(q)``, with the 19 terms of :data:`SOLOFF_TERMS`
+    (default) or the 20 of :data:`~mitpiv.physics.camera_fit.CUBIC_TERMS`."""
+
+    def __init__(self, coefficients, centre_mm, scale_mm, resolution=None, *, terms=SOLOFF_TERMS):
+        terms = tuple(tuple(int(e) for e in t) for t in terms)
+        if terms not in (SOLOFF_TERMS, CUBIC_TERMS):
+            raise ConfigError(f"PolynomialMapping: 'terms' must be Soloff's 19 {list(SOLOFF_TERMS)} or the 20 of the "
+                              f"full cubic (those and z^3), got {list(terms)}.")
+        self.terms = terms
+        self.coefficients = np.asarray(coefficients, dtype=float).reshape(2, len(terms))
         self.centre_mm = np.asarray(centre_mm, dtype=float).reshape(3)
         self.scale_mm = np.asarray(scale_mm, dtype=float).reshape(3)
         self.resolution = None if resolution is None else tuple(int(v) for v in resolution)
 
     @staticmethod
-    def design(q) -> np.ndarray:
-        """Monomials of normalised coordinates q (..., 3) -> (..., 19)."""
-        return np.stack([q[..., 0] ** i * q[..., 1] ** j * q[..., 2] ** k for i, j, k in SOLOFF_TERMS], axis=-1)
+    def design(q, terms=SOLOFF_TERMS) -> np.ndarray:
+        """Monomials of normalised coordinates q (..., 3) -> (..., len(terms))."""
+        return monomials(q, terms)
 
     @staticmethod
     def normalisation(p_world) -> tuple[np.ndarray, np.ndarray]:
@@ -162,24 +218,24 @@ class PolynomialMapping(CameraMapping):
         return centre, scale
 
     @classmethod
-    def fit(cls, pixels, p_world, *, resolution=None) -> PolynomialMapping:
+    def fit(cls, pixels, p_world, *, resolution=None, terms=SOLOFF_TERMS) -> PolynomialMapping:
         """Least-squares fit (the caller checks the marker set; see :func:`calibrate`)."""
         w = np.asarray(p_world, dtype=float).reshape(-1, 3)
         px = np.asarray(pixels, dtype=float).reshape(-1, 2)
         centre, scale = cls.normalisation(w)
-        coef, *_ = np.linalg.lstsq(cls.design((w - centre) / scale), px, rcond=None)
-        return cls(coef.T, centre, scale, resolution)
+        coef, *_ = np.linalg.lstsq(cls.design((w - centre) / scale, terms), px, rcond=None)
+        return cls(coef.T, centre, scale, resolution, terms=terms)
 
     def project(self, p_world) -> np.ndarray:
         q = (np.asarray(p_world, dtype=float) - self.centre_mm) / self.scale_mm
-        return self.design(q) @ self.coefficients.T
+        return self.design(q, self.terms) @ self.coefficients.T
 
     def jacobian(self, p_world) -> np.ndarray:
         q = (np.asarray(p_world, dtype=float) - self.centre_mm) / self.scale_mm
         cols = []
         for axis in range(3):
             terms = []
-            for e in SOLOFF_TERMS:
+            for e in self.terms:
                 if e[axis] == 0:
                     terms.append(np.zeros(q.shape[:-1]))
                     continue
@@ -192,13 +248,14 @@ class PolynomialMapping(CameraMapping):
         return np.stack(cols, axis=-1)
 
     def to_dict(self) -> dict:
-        return {"type": "soloff_polynomial", "terms": [list(t) for t in SOLOFF_TERMS],
+        return {"type": "soloff_polynomial", "terms": [list(t) for t in self.terms],
                 "coefficients": self.coefficients.tolist(), "centre_mm": self.centre_mm.tolist(),
                 "scale_mm": self.scale_mm.tolist(), "resolution": None if self.resolution is None else list(self.resolution)}
 
     @classmethod
     def _from_dict(cls, d: dict) -> PolynomialMapping:
-        terms = [tuple(t) for t in d.get("terms", SOLOFF_TERMS)]
-        if terms != list(SOLOFF_TERMS):
-            raise ConfigError(f"PolynomialMapping.from_dict: 'terms' {terms} are not Soloff's 19 terms {list(SOLOFF_TERMS)}.")
-        return cls(d["coefficients"], d["centre_mm"], d["scale_mm"], d.get("resolution"))
+        terms = tuple(tuple(t) for t in d.get("terms", SOLOFF_TERMS))
+        if terms not in (SOLOFF_TERMS, CUBIC_TERMS):
+            raise ConfigError(f"PolynomialMapping.from_dict: 'terms' {list(terms)} are not Soloff's 19 terms "
+                              f"{list(SOLOFF_TERMS)} nor the full cubic's 20.")
+        return cls(d["coefficients"], d["centre_mm"], d["scale_mm"], d.get("resolution"), terms=terms)

@@ -118,7 +118,12 @@ def raise_plugin_error(e: Exception, where: str):
         name, text = found[-1]
         cls = getattr(errors, name, ConfigError)
         raise cls(f"{text} (in {where})") from None
-    raise ConfigError(f"{where} failed to load: {msg.strip().splitlines()[0]}") from None
+    lines = msg.strip().splitlines()
+    unused = [ln.strip(" -") for ln in lines[1:] if ln.strip().startswith("- $")]
+    if "unused parameters" in lines[0] and unused:  # Mitsuba lists them on the following lines
+        raise ConfigError(f"{where} failed to load: parameters {', '.join(unused)} are not used by the scene XML; "
+                          f"remove their <default> (or the -D / [scene] params entry) or use them as $name.") from None
+    raise ConfigError(f"{where} failed to load: {lines[0]}") from None
 
 
 def load_dict(d: dict):

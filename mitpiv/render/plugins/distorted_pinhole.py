@@ -28,8 +28,28 @@
        distortion, optionally rvec/tvec in mm; :func:`mitpiv.io.read_opencv_camera`)
        instead of ``focal_length_mm``/``fov``, the principal point and ``k1``..``p2``; its
        pose is used unless ``to_world`` or a placement is given (then the file must hold
-       none). Relative paths resolve against the scene's folder. The film must have the
+       none). Or a DLT or third-order polynomial table (``.csv``/``.json``, several
+       cameras; :mod:`mitpiv.io.calibration_tables`): the pose always comes from the table.
+       Relative paths resolve against the scene's folder. The film must have the
        calibrated size; ``pixel_pitch_um`` comes from the file or the property.
+   * - calibration_camera
+     - string
+     - --
+     - the sensor's id
+     - DLT / polynomial table only: the camera's name (or index) in the table (default: the
+       only camera, else the one named as the sensor's ``id``).
+   * - calibration_volume_mm
+     - string
+     - mm
+     - the table's
+     - Polynomial table only: ``"x_min x_max y_min y_max z_min z_max"``, the calibration
+       volume over which a pinhole + Brown-Conrady camera is fitted to the polynomial.
+   * - calibration_max_residual_px
+     - float
+     - px
+     - 0.1
+     - Largest reprojection error accepted for the renderable approximation of a DLT (skew,
+       non-square pixels) or a polynomial (the fitted camera); beyond it loading fails.
    * - focal_length_mm
      - float
      - mm
@@ -147,6 +167,7 @@ the scene asks for it.
 
 from __future__ import annotations
 
+import logging
 import math
 
 import drjit as dr
@@ -221,7 +242,16 @@ class DistortedPinhole(MitpivSensor):
         self._finish_init(cam, to_world, focus_normal, psf_props, film)
 
     def _init_calibrated(self, props, rd, calibration: str, size) -> None:
-        """The camera of a user's OpenCV calibration file (the ``calibration`` property)."""
+        """The camera of a user's calibration file (the ``calibration`` property): OpenCV, or a
+        DLT / polynomial table (:mod:`mitpiv.io.calibration_tables`)."""
+        from mitpiv.io.calibration_tables import (
+            calibration_table_format,
+            read_dlt_cameras,
+            read_dlt_table,
+            read_polynomial_cameras,
+            read_polynomial_table,
+            select_camera,
+        )
         from mitpiv.io.opencv import read_opencv_camera
 
         clash = [k for k in ("focal_length_mm", "fov", "principal_point_x_px", "principal_point_y_px", "k1", "k2", "k3",
@@ -239,8 +269,48 @@ class DistortedPinhole(MitpivSensor):
         self.near_clip = check_positive("near_clip", rd.float("near_clip", 0.01), owner="distorted_pinhole", unit="mm")
         self.far_clip = check_positive("far_clip", rd.float("far_clip", 1e7), owner="distorted_pinhole", unit="mm")
         path = str(mi.file_resolver().resolve(calibration))
-        cam = read_opencv_camera(path, pixel_pitch_um=pitch, resolution=size, f_number=f_number,
-                                 focus_distance_mm=focus, pose="forbid" if xml_pose else "optional")
+        which = rd.string("calibration_camera", None)
+        vol = rd.string("calibration_volume_mm", None)
+        max_res = rd.float("calibration_max_residual_px", None)
+        fmt = calibration_table_format(path)
+        self.calibration_info = None
+        if fmt in ("dlt", "polynomial"):
+            if xml_pose:
+                raise ConfigError(f"distorted_pinhole: the {fmt} table {calibration!r} holds the camera's pose; remove "
+                                  f"to_world / the placement (target, azimuth_deg, ...).")
+            volume = None
+            if vol is not None:
+                try:
+                    volume = [float(v) for v in vol.replace(",", " ").split()]
+                except ValueError:
+                    volume = []
+                if len(volume) != 6:
+                    raise ConfigError(f"distorted_pinhole: 'calibration_volume_mm' must be six numbers 'x_min x_max "
+                                      f"y_min y_max z_min z_max' [mm], got {vol!r}.")
+            records = (read_dlt_table if fmt == "dlt" else read_polynomial_table)(path)[0]
+            if which is None and len(records) > 1:
+                which = props.id() or None  # the sensor's id names its camera in the table
+            rec = select_camera(records, which, path=calibration)
+            kw = {"camera": rec["name"], "pixel_pitch_um": pitch, "resolution": size, "f_number": f_number,
+                  "focus_distance_mm": focus}
+            if max_res is not None:
+                kw["max_residual_px"] = check_positive("calibration_max_residual_px", max_res,
+                                                       owner="distorted_pinhole", unit="px")
+            if fmt == "dlt":
+                cam, self.calibration_info = read_dlt_cameras(path, volume_mm=volume, **kw)
+            else:
+                cam, self.calibration_info = read_polynomial_cameras(path, volume_mm=volume, **kw)
+            res = self.calibration_info.get("max_px", self.calibration_info.get("max_residual_px"))
+            logging.getLogger(__name__).info("distorted_pinhole: camera %r of the %s table %s, renderable within %.3g px",
+                                             rec["name"], fmt, calibration, res)
+        else:
+            extra = [k for k, v in (("calibration_camera", which), ("calibration_volume_mm", vol),
+                                    ("calibration_max_residual_px", max_res)) if v is not None]
+            if extra:
+                raise ConfigError(f"distorted_pinhole: {extra} apply to DLT and polynomial tables only; "
+                                  f"{calibration!r} is an OpenCV calibration (one camera, no volume).")
+            cam = read_opencv_camera(path, pixel_pitch_um=pitch, resolution=size, f_number=f_number,
+                                     focus_distance_mm=focus, pose="forbid" if xml_pose else "optional")
         if not xml_pose:
             self.m_to_world = mi.Transform4f(cam.to_world_mitsuba())
         to_world = np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4)
