@@ -139,8 +139,12 @@ def export_vtk(run_dir, out_dir=None, *, progress: Progress = None) -> list[Path
 
     run = Path(run_dir)
     exp = _experiment(run)
+    if exp.get("kind") == "tracking":  # its own files: tracks and true trajectories
+        from mitpiv.studies.kinds.tracking import export_vtk as export_tracking
+
+        return export_tracking(run, out_dir, progress=progress)
     if exp.get("kind", "tomo") != "tomo":
-        raise ConfigError(f"export: --vtk exports tomo runs; {str(run)!r} is a {exp.get('kind')!r} run.")
+        raise ConfigError(f"export: --vtk exports tomo and tracking runs; {str(run)!r} is a {exp.get('kind')!r} run.")
     _need(run, "particles", "reconstruct", "evaluate", "piv")
     out = Path(out_dir) if out_dir is not None else run / "vtk"
     truth = read_truth(run / "particles" / "truth.npz")

@@ -639,6 +639,9 @@ def stage_evaluate(ctx: StageContext) -> dict:
                     "yield": "no true particle in the measurement box",
                     "ghost_fraction": "no particle was reconstructed",
                     "correct_track": "no track sample inside the measurement box",
+                    "velocity_error_rel": "the true velocities are all zero: a relative error is undefined",
+                    "acceleration_error_rel": "the true accelerations are all zero (e.g. a uniform flow): a relative "
+                                              "error is undefined",
                     "": "not computable"})
     for k in ("velocity_error_mm_s", "velocity_error_rel", "acceleration_error_mm_s2", "acceleration_error_rel",
               "binned_mean_error_mm_s"):
