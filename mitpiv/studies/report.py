@@ -439,8 +439,11 @@ def backlit_report(cfg, run_dir, results: dict, timings: dict) -> Report:
 
 # -------------------------------------------------------------------------- tracking
 def _tracks_by_error(tracks, err, lo, hi):
-    """Tracks projected on x-y and x-z, each sample coloured by its velocity error."""
+    """Tracks in two slabs through the box centre (x-y: the middle quarter of z; x-z: the
+    middle quarter of y), each sample coloured by its velocity error."""
     def draw(path):
+        from matplotlib.collections import LineCollection
+
         plt = _plt()
         fig, axs = plt.subplots(1, 2, figsize=(11, 4.2))
         p = tracks.positions_mm
@@ -448,21 +451,30 @@ def _tracks_by_error(tracks, err, lo, hi):
         e = np.where(ok, err, np.nan)
         finite = np.isfinite(e)
         vmax = float(np.percentile(e[finite], 98)) if finite.any() else 1.0
-        for ax, (i, j, name) in zip(axs, ((0, 1, "y"), (0, 2, "z")), strict=True):
-            for t in range(p.shape[0]):  # one polyline per track (a plot call per track; tracks are few)
-                ax.plot(p[t, ok[t], i], p[t, ok[t], j], color="0.75", lw=0.6, zorder=1)
-            ax.scatter(p[~finite & ok][:, i], p[~finite & ok][:, j], s=3, c="k", marker="x", lw=0.5, zorder=2,
-                       label="unmatched (ghost or no velocity)")
-            sc = ax.scatter(p[finite][:, i], p[finite][:, j], s=4, c=e[finite], cmap="viridis", vmin=0,
-                            vmax=vmax or None, zorder=3)
+        seg = ok[:, 1:] & ok[:, :-1]  # consecutive samples of one track: one line segment
+        mid, quarter = 0.5 * (lo + hi), 0.125 * (hi - lo)
+        sc = None
+        for ax, (i, j, k, name) in zip(axs, ((0, 1, 2, "y"), (0, 2, 1, "z")), strict=True):
+            near = ok & (np.abs(np.nan_to_num(p[..., k], nan=np.inf) - mid[k]) <= quarter[k])
+            s_ok = seg & near[:, 1:] & near[:, :-1]
+            lines = np.stack([p[:, :-1][s_ok][:, [i, j]], p[:, 1:][s_ok][:, [i, j]]], axis=1)
+            ax.add_collection(LineCollection(lines, colors="0.7", linewidths=0.6, zorder=1))
+            ghost = near & ~finite
+            ax.scatter(p[ghost][:, i], p[ghost][:, j], s=6, c="red", marker="x", lw=0.6, zorder=2,
+                       label="no velocity error (unmatched or track end)")
+            good = near & finite
+            sc = ax.scatter(p[good][:, i], p[good][:, j], s=5, c=e[good], cmap="viridis", vmin=0, vmax=vmax or None,
+                            zorder=3)
             ax.set_xlim(lo[i], hi[i])
             ax.set_ylim(lo[j], hi[j])
             ax.set_xlabel("x [mm]")
             ax.set_ylabel(f"{name} [mm]")
             ax.set_aspect("equal")
+            ax.set_title(f"{'xyz'[k]} within {mid[k] - quarter[k]:.2f} .. {mid[k] + quarter[k]:.2f} mm", fontsize=9)
         axs[0].legend(fontsize=7, loc="upper right")
         fig.colorbar(sc, ax=axs, label="|v - v_true| [mm/s]", shrink=0.8)
-        fig.suptitle(f"{tracks.n_tracks} tracks, coloured by velocity error", fontsize=10)
+        fig.suptitle(f"{tracks.n_tracks} tracks (slabs through the box centre), coloured by velocity error",
+                     fontsize=10)
         save_figure(fig, path)
 
     return draw
