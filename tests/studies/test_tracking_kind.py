@@ -1,5 +1,5 @@
 """The tracking experiment kind (kind = "tracking"): the tiny LPT-geometry run end to end
-(seeded flow over 8 frames, rendered, OTF from the images, STB, LPT Challenge metrics,
+(seeded flow over 6 frames, rendered, OTF from the images, STB, LPT Challenge metrics,
 report, VTK export), its schema errors, and the hard cases of issue 27: particles leaving
 and entering the volume, a camera that sees no particle in a frame, a sequence of one frame.
 
@@ -40,7 +40,7 @@ def tiny(tmp_path_factory):
 def test_tiny_run_end_to_end(tiny):
     res, out = tiny
     ev = res["evaluate"]
-    assert res.kind == "tracking" and res["method"] == "stb" and res["frames"] == 8
+    assert res.kind == "tracking" and res["method"] == "stb" and res["frames"] == 6
     assert ev["yield"] > MIN_YIELD and ev["ghost_fraction"] < MAX_GHOSTS
     assert ev["position_error_px"] < MAX_POSITION_ERROR_PX
     assert ev["velocity_error_rel"] < MAX_VELOCITY_ERROR_REL
