@@ -498,19 +498,37 @@ def _yield_per_frame(y, g):
     return draw
 
 
-def _track_lengths(hist):
+def _track_lengths(hist, true_hist=None):
     def draw(path):
+        from matplotlib.ticker import MaxNLocator
+
         plt = _plt()
         h = np.asarray(hist, float)
         fig, ax = plt.subplots(figsize=(6, 3.5))
-        ax.bar(np.arange(h.size), h, width=0.8)
+        ax.bar(np.arange(h.size), h, width=0.8, label="tracks found")
+        if true_hist is not None:
+            t = np.asarray(true_hist, float)
+            ax.step(np.arange(t.size), t, where="mid", color="k", lw=1.2, label="true particles (frames in the box)")
         ax.set_xlabel("track length [frames]")
         ax.set_ylabel("tracks")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.grid(alpha=0.3, axis="y")
+        ax.legend(fontsize=8, loc="upper left")
         fig.tight_layout()
         save_figure(fig, path)
 
     return draw
+
+
+def _true_lengths(run: Path, lo, hi):
+    """Histogram of the frames each true particle spends in the measurement box."""
+    from mitpiv.io import read_truth
+
+    p = read_truth(run / "field" / "truth.npz")["positions_mm"]
+    inside = np.all(np.isfinite(p), axis=2) & np.all((np.nan_to_num(p, nan=np.inf) >= lo) & (np.nan_to_num(
+        p, nan=np.inf) <= hi), axis=2)
+    n = inside.sum(axis=0)
+    return np.bincount(n[n > 0])
 
 
 def tracking_report(cfg, run_dir, results: dict, timings: dict) -> Report:
@@ -529,7 +547,7 @@ def tracking_report(cfg, run_dir, results: dict, timings: dict) -> Report:
     figures = {"images_frame0.png": _sensor_images(imgs, _frame_files(run, 0)),
                "tracks_velocity_error.png": _tracks_by_error(tracks, err["velocity_error_mm_s"], lo, hi),
                "yield_per_frame.png": _yield_per_frame(err["yield_per_frame"], err["ghost_per_frame"]),
-               "track_lengths.png": _track_lengths(err["length_histogram"])}
+               "track_lengths.png": _track_lengths(err["length_histogram"], _true_lengths(run, lo, hi))}
     ev = results["evaluate"]
     fl = results["field"]
 

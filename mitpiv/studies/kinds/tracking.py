@@ -50,7 +50,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from mitpiv.errors import ConfigError
+from mitpiv.errors import CalibrationError, ConfigError
 from mitpiv.studies.kinds.tomo import SceneTable
 from mitpiv.studies.runner import RENDER_PACKAGES, Kind, Stage, StageContext
 from mitpiv.studies.schema import Table, Vec3, discriminated, model_from_signature
@@ -455,8 +455,15 @@ def stage_calibrate(ctx: StageContext) -> dict:
         vis = cam.visible(world)
         uv = cam.project(world[vis])
         uv = uv + generator(cfg.seed, "calibration-noise", sid).normal(0.0, c.noise_px, uv.shape)
-        mapping = calibrate(uv, world[vis], model="pinhole", resolution=cam.resolution, distortion="none",
-                            pixel_pitch_um=cam.pixel_pitch_um, max_rms_px=max(0.5, 5 * c.noise_px))
+        try:
+            mapping = calibrate(uv, world[vis], model="pinhole", resolution=cam.resolution, distortion="none",
+                                pixel_pitch_um=cam.pixel_pitch_um, max_rms_px=max(0.5, 5 * c.noise_px))
+        except CalibrationError as e:
+            raise CalibrationError(
+                f"experiment: [calibration] model = 'pinhole': camera {sid!r} ({int(vis.sum())} target points, "
+                f"noise_px = {c.noise_px}): {e} A narrow field of view (a long lens, a small crop) is nearly affine: "
+                f"with noisy points the linear start misplaces the principal point. Use model = 'true', a smaller "
+                f"noise_px or a larger crop.") from None
         fitted.append(mapping.camera)
         reports.append(mapping.fit_report)
     return _write_cameras(ctx.out, fitted, true, ids, reports)
