@@ -89,6 +89,17 @@ def test_pinhole_calibration_reruns_from_the_calibrate_stage_only(tiny, tmp_path
     assert all(r < 1e-3 for r in res2.stages["calibrate"]["fit_rms_px"])
 
 
+def test_a_run_of_one_frame_has_particles_but_no_velocities(tiny, tmp_path):
+    from mitpiv.errors import MitpivWarning
+
+    with pytest.warns(MitpivWarning, match="STB needs 4"):
+        res = run_experiment(TINY, tmp_path, overrides={"sequence.frames": 1})
+    ev = res["evaluate"]
+    assert res["method"] == "ipr" and ev["yield"] > MIN_YIELD and ev["ghost_fraction"] < MAX_GHOSTS
+    assert ev["velocity_error_mm_s"] is None and "STB needs 4" in ev["null_reasons"]["velocity_error_mm_s"]
+    assert "1 frame," in res.headline() and "n/a" in res.headline()
+
+
 @pytest.mark.parametrize("overrides, words", [
     ({"sequence.frames": 0}, ["sequence", "frames"]),
     ({"tracking.tolerance_pxx": 1.0}, ["tolerance_pxx", "tolerance_px"]),

@@ -766,7 +766,8 @@ def _num(x, spec):
 
 def headline(m: dict) -> str:
     ev = m.get("evaluate") or {}
-    text = (f"{m['name']}: {m.get('frames')} frames, ppp {_num(ev.get('ppp'), '.4f')}, yield {_pct(ev.get('yield'))}, "
+    n = m.get("frames")
+    text = (f"{m['name']}: {n} frame{'' if n == 1 else 's'}, ppp {_num(ev.get('ppp'), '.4f')}, yield {_pct(ev.get('yield'))}, "
             f"ghosts {_pct(ev.get('ghost_fraction'))}, position error {_num(ev.get('position_error_px'), '.3f')} px, "
             f"velocity error {_pct(ev.get('velocity_error_rel'))}")
     why = ev.get("null_reasons") or {}
