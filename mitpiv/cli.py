@@ -785,7 +785,7 @@ def main(argv=None) -> int:
         x.add_argument(f"--{flag}", **_flag_kwargs(key))
     x.set_defaults(func=cmd_run)
     sc = sub.add_parser("schema", help="print every experiment table and field with its unit, default and range")
-    sc.add_argument("--kind", default="tomo", help="experiment kind: tomo (default) or backlit")
+    sc.add_argument("--kind", default="tomo", help="experiment kind: tomo (default), backlit or tracking")
     sc.set_defaults(func=cmd_schema)
     w = sub.add_parser("sweep", help="run a parameter study (grid or list of experiment overrides) on Dask")
     w.add_argument("study", help="study .toml")

@@ -124,7 +124,7 @@ def read_particles_ply(path) -> dict:
 
 
 def write_truth(path, *, positions_mm, times_s, diameters_um, velocities_mm_s=None, flow: dict | None = None,
-                extra: dict | None = None) -> Path:
+                extra: dict | None = None, accelerations_mm_s2=None, ids=None) -> Path:
     """Write ground truth for F frames of N particles (atomic): the one truth format of
     every experiment kind (particle images and backlit droplets).
 
@@ -133,14 +133,21 @@ def write_truth(path, *, positions_mm, times_s, diameters_um, velocities_mm_s=No
     path : str or Path
         ``.npz`` (the format :func:`read_truth` reads) or ``.csv`` (for other software).
     positions_mm : (F, N, 3) array
-        Particle centres in every frame [mm].
+        Particle centres in every frame [mm]; NaN where particle ``n`` is absent from frame
+        ``f`` (time-resolved sequences: particles leave and enter the volume, each column
+        one identity throughout).
     times_s : (F,) array
         Frame times [s].
     diameters_um : (N,) array or float
         Physical diameters [um] (micrometres also for millimetre droplets: convert once
         at the boundary, ``diameters_mm * 1e3``).
-    velocities_mm_s : (N, 3) array, optional
-        Per-particle velocity [mm/s] (e.g. ballistic droplets); stored when given.
+    velocities_mm_s : (N, 3) or (F, N, 3) array, optional
+        Per-particle velocity [mm/s] (e.g. ballistic droplets), or per frame and particle
+        (time-resolved sequences); stored when given.
+    accelerations_mm_s2 : (F, N, 3) array, optional
+        Per frame and particle material acceleration [mm/s^2]; stored when given.
+    ids : (N,) integer array, optional
+        Particle identities (default: the column index); stored when given.
     flow, extra : dict, optional
         JSON metadata (the flow model, the seeding, ...).
 
@@ -164,13 +171,26 @@ def write_truth(path, *, positions_mm, times_s, diameters_um, velocities_mm_s=No
     vel = None
     if velocities_mm_s is not None:
         vel = np.asarray(velocities_mm_s, dtype=np.float64)
-        if vel.shape != (pos.shape[1], 3):
-            raise ConfigError(f"write_truth: velocities_mm_s must have shape (N, 3) = ({pos.shape[1]}, 3) [mm/s], got "
-                              f"{vel.shape}.")
+        if vel.shape not in ((pos.shape[1], 3), pos.shape):
+            raise ConfigError(f"write_truth: velocities_mm_s must have shape (N, 3) = ({pos.shape[1]}, 3) or (F, N, 3) = "
+                              f"{pos.shape} [mm/s], got {vel.shape}.")
+    acc = None
+    if accelerations_mm_s2 is not None:
+        acc = np.asarray(accelerations_mm_s2, dtype=np.float64)
+        if acc.shape != pos.shape:
+            raise ConfigError(f"write_truth: accelerations_mm_s2 must have shape (F, N, 3) = {pos.shape} [mm/s^2], got "
+                              f"{acc.shape}.")
+    pid = None
+    if ids is not None:
+        pid = np.asarray(ids)
+        if pid.shape != (pos.shape[1],) or not np.issubdtype(pid.dtype, np.integer):
+            raise ConfigError(f"write_truth: ids must be ({pos.shape[1]},) integers, got {pid.dtype} {pid.shape}.")
+        pid = pid.astype(np.int64)
     path = Path(path)
     if path.suffix == ".npz":
         write_npz(path, {"positions_mm": pos, "times_s": times, "diameters_um": diam,
                          "displacements_mm": np.diff(pos, axis=0), "velocities_mm_s": vel,
+                         "accelerations_mm_s2": acc, "ids": pid,
                          "flow": json.dumps(to_jsonable(flow or {})), "extra": json.dumps(to_jsonable(extra or {}))},
                   owner="write_truth")
     elif path.suffix == ".csv":
@@ -180,6 +200,8 @@ def write_truth(path, *, positions_mm, times_s, diameters_um, velocities_mm_s=No
                 cols = ["id", "diameter_um"]
                 for k in range(pos.shape[0]):
                     cols += [f"x{k}_mm", f"y{k}_mm", f"z{k}_mm"]
+                if vel is not None and vel.ndim == 3:  # per frame: the first frame's
+                    vel = vel[0]
                 if vel is not None:
                     cols += ["vx_mm_s", "vy_mm_s", "vz_mm_s"]
                 cols += ["dx_mm", "dy_mm", "dz_mm"]
@@ -198,8 +220,9 @@ def read_truth(path) -> dict:
     """Read an NPZ truth file written by :func:`write_truth`.
 
     Returns a dict with ``positions_mm`` (F, N, 3), ``times_s`` (F,), ``diameters_um``
-    (N,), ``displacements_mm`` (F-1, N, 3), ``velocities_mm_s`` ((N, 3) or None when not
-    stored), ``flow`` and ``extra`` (dicts).
+    (N,), ``displacements_mm`` (F-1, N, 3), ``velocities_mm_s`` ((N, 3), (F, N, 3) or
+    None when not stored), ``accelerations_mm_s2`` ((F, N, 3) or None), ``ids`` ((N,) or
+    None), ``flow`` and ``extra`` (dicts).
 
     Truth files of earlier backlit runs (``diameters_mm``, ``velocities_mm_s``, no
     displacements or metadata) read too: their diameters are converted to micrometres.
@@ -219,7 +242,8 @@ def read_truth(path) -> dict:
                               f"not describe F frames of N particles ((F, N, 3) and (N,)).")
     return {"positions_mm": pos, "times_s": z["times_s"], "diameters_um": diam_um,
             "displacements_mm": z["displacements_mm"] if "displacements_mm" in z else np.diff(pos, axis=0),
-            "velocities_mm_s": z.get("velocities_mm_s"),
+            "velocities_mm_s": z.get("velocities_mm_s"), "accelerations_mm_s2": z.get("accelerations_mm_s2"),
+            "ids": z.get("ids"),
             "flow": json_entry(z, "flow", path, default={}), "extra": json_entry(z, "extra", path, default={})}
 
 

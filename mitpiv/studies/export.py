@@ -142,8 +142,12 @@ def export_vtk(run_dir, out_dir=None, *, progress: Progress = None) -> list[Path
 
     run = Path(run_dir)
     exp = _experiment(run)
+    if exp.get("kind") == "tracking":  # its own files: tracks and true trajectories
+        from mitpiv.studies.kinds.tracking import export_vtk as export_tracking
+
+        return export_tracking(run, out_dir, progress=progress)
     if exp.get("kind", "tomo") != "tomo":
-        raise ConfigError(f"export: --vtk exports tomo runs; {str(run)!r} is a {exp.get('kind')!r} run.")
+        raise ConfigError(f"export: --vtk exports tomo and tracking runs; {str(run)!r} is a {exp.get('kind')!r} run.")
     _need(run, "particles", "reconstruct", "evaluate", "piv")
     out = Path(out_dir) if out_dir is not None else run / "vtk"
     truth = read_truth(run / "particles" / "truth.npz")
@@ -305,10 +309,12 @@ def export_tracker_inputs(run_dir, out_dir, *, tool: str, progress: Progress = N
     if tool == "openlpt":
         from mitpiv.io.openlpt import export_openlpt
 
-        if "frame_rate_hz" not in options and (run / "particles" / "truth.npz").is_file():
+        # the truth: a tomo run's particles stage, a tracking run's field stage
+        truth = next((run / s / "truth.npz" for s in ("particles", "field") if (run / s / "truth.npz").is_file()), None)
+        if "frame_rate_hz" not in options and truth is not None:
             from mitpiv.io import read_truth
 
-            t = np.asarray(read_truth(run / "particles" / "truth.npz")["times_s"], dtype=np.float64)
+            t = np.asarray(read_truth(truth)["times_s"], dtype=np.float64)
             if t.size > 1 and t[1] > t[0]:
                 options["frame_rate_hz"] = 1.0 / float(t[1] - t[0])
         manifest = export_openlpt(out_dir, imgs["files"], imgs["cameras"], **box, progress=progress, **options)

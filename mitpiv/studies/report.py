@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Report", "write", "tomo_report", "backlit_report", "accuracy_report", "save_figure", "plot_sweep"]
+__all__ = ["Report", "write", "tomo_report", "backlit_report", "tracking_report", "accuracy_report", "save_figure",
+           "plot_sweep"]
 
 
 @dataclass
@@ -433,6 +434,149 @@ def backlit_report(cfg, run_dir, results: dict, timings: dict) -> Report:
               f"outlier ratio {t['outlier_ratio']:.2f}); velocity RMS x, y, z = "
               f"{', '.join(f'{v:.1f}' for v in t['rms'])} mm/s.", "", *_timings_table(timings), "",
               "![images](images.png)", "", "![errors](errors.png)", ""]
+    return Report("\n".join(lines), figures)
+
+
+# -------------------------------------------------------------------------- tracking
+def _tracks_by_error(tracks, err, lo, hi):
+    """Tracks in two slabs through the box centre (x-y: the middle quarter of z; x-z: the
+    middle quarter of y), each sample coloured by its velocity error."""
+    def draw(path):
+        from matplotlib.collections import LineCollection
+
+        plt = _plt()
+        fig, axs = plt.subplots(1, 2, figsize=(11, 4.2))
+        p = tracks.positions_mm
+        ok = np.all(np.isfinite(p), axis=2)
+        e = np.where(ok, err, np.nan)
+        finite = np.isfinite(e)
+        vmax = float(np.percentile(e[finite], 98)) if finite.any() else 1.0
+        seg = ok[:, 1:] & ok[:, :-1]  # consecutive samples of one track: one line segment
+        mid, quarter = 0.5 * (lo + hi), 0.125 * (hi - lo)
+        sc = None
+        for ax, (i, j, k, name) in zip(axs, ((0, 1, 2, "y"), (0, 2, 1, "z")), strict=True):
+            near = ok & (np.abs(np.nan_to_num(p[..., k], nan=np.inf) - mid[k]) <= quarter[k])
+            s_ok = seg & near[:, 1:] & near[:, :-1]
+            lines = np.stack([p[:, :-1][s_ok][:, [i, j]], p[:, 1:][s_ok][:, [i, j]]], axis=1)
+            ax.add_collection(LineCollection(lines, colors="0.7", linewidths=0.6, zorder=1))
+            ghost = near & ~finite
+            ax.scatter(p[ghost][:, i], p[ghost][:, j], s=6, c="red", marker="x", lw=0.6, zorder=2,
+                       label="no velocity error (unmatched or track end)")
+            good = near & finite
+            sc = ax.scatter(p[good][:, i], p[good][:, j], s=5, c=e[good], cmap="viridis", vmin=0, vmax=vmax or None,
+                            zorder=3)
+            ax.set_xlim(lo[i], hi[i])
+            ax.set_ylim(lo[j], hi[j])
+            ax.set_xlabel("x [mm]")
+            ax.set_ylabel(f"{name} [mm]")
+            ax.set_aspect("equal")
+            ax.set_title(f"{'xyz'[k]} within {mid[k] - quarter[k]:.2f} .. {mid[k] + quarter[k]:.2f} mm", fontsize=9)
+        axs[0].legend(fontsize=7, loc="upper right")
+        fig.colorbar(sc, ax=axs, label="|v - v_true| [mm/s]", shrink=0.8)
+        fig.suptitle(f"{tracks.n_tracks} tracks (slabs through the box centre), coloured by velocity error",
+                     fontsize=10)
+        save_figure(fig, path)
+
+    return draw
+
+
+def _yield_per_frame(y, g):
+    def draw(path):
+        plt = _plt()
+        fig, ax = plt.subplots(figsize=(6, 3.5))
+        f = np.arange(len(y))
+        ax.plot(f, 100 * np.asarray(y, float), "o-", ms=3, label="yield (true particles found)")
+        ax.plot(f, 100 * np.asarray(g, float), "s-", ms=3, label="ghost fraction (of particles found)")
+        ax.set_xlabel("frame")
+        ax.set_ylabel("%")
+        ax.set_ylim(-2, 102)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        save_figure(fig, path)
+
+    return draw
+
+
+def _track_lengths(hist, true_hist=None):
+    def draw(path):
+        from matplotlib.ticker import MaxNLocator
+
+        plt = _plt()
+        h = np.asarray(hist, float)
+        fig, ax = plt.subplots(figsize=(6, 3.5))
+        ax.bar(np.arange(h.size), h, width=0.8, label="tracks found")
+        if true_hist is not None:
+            t = np.asarray(true_hist, float)
+            ax.step(np.arange(t.size), t, where="mid", color="k", lw=1.2, label="true particles (frames in the box)")
+        ax.set_xlabel("track length [frames]")
+        ax.set_ylabel("tracks")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.grid(alpha=0.3, axis="y")
+        ax.legend(fontsize=8, loc="upper left")
+        fig.tight_layout()
+        save_figure(fig, path)
+
+    return draw
+
+
+def _true_lengths(run: Path, lo, hi):
+    """Histogram of the frames each true particle spends in the measurement box."""
+    from mitpiv.io import read_truth
+
+    p = read_truth(run / "field" / "truth.npz")["positions_mm"]
+    inside = np.all(np.isfinite(p), axis=2) & np.all((np.nan_to_num(p, nan=np.inf) >= lo) & (np.nan_to_num(
+        p, nan=np.inf) <= hi), axis=2)
+    n = inside.sum(axis=0)
+    return np.bincount(n[n > 0])
+
+
+def tracking_report(cfg, run_dir, results: dict, timings: dict) -> Report:
+    """The report of a tracking run: the cameras' images of the first frame, the tracks
+    coloured by their velocity error, yield and ghost fraction per frame, the track-length
+    histogram and the LPT Challenge's metrics."""
+    from mitpiv.io import read_npz
+    from mitpiv.studies.kinds.tomo import fmt_metric as f
+    from mitpiv.studies.kinds.tracking import _frame_files, bounds_of, frame_images, read_tracks
+
+    run = Path(run_dir)
+    imgs, _ = frame_images(run, 0)
+    tracks = read_tracks(run / "track" / "tracks.npz")
+    err = read_npz(run / "evaluate" / "errors.npz", what="errors")
+    lo, hi = bounds_of(cfg)
+    figures = {"images_frame0.png": _sensor_images(imgs, _frame_files(run, 0)),
+               "tracks_velocity_error.png": _tracks_by_error(tracks, err["velocity_error_mm_s"], lo, hi),
+               "yield_per_frame.png": _yield_per_frame(err["yield_per_frame"], err["ghost_per_frame"]),
+               "track_lengths.png": _track_lengths(err["length_histogram"], _true_lengths(run, lo, hi))}
+    ev = results["evaluate"]
+    fl = results["field"]
+
+    def pct(x):
+        return f(None if x is None else 100 * x, ".2f") + " %"
+
+    lines = [f"# {cfg.name}", "", f"Scene `{Path(cfg.scene.xml).name}`, seed {cfg.seed}, flow `{cfg.flow.kind}`, "
+             f"{cfg.sequence.frames} frames {cfg.flow.dt_s * 1e3:g} ms apart; {fl['n_particles']} particles in the box "
+             f"({fl['n_identities']} identities, {fl['entered']} entered), image density {f(ev.get('ppp'), '.4f')} ppp; "
+             f"{results['track']['method'].upper()} tracking.", "",
+             "## LPT Challenge metrics (all frames)", "", "| metric | value |", "|---|---|",
+             f"| yield (true particles found) | {pct(ev.get('yield'))} |",
+             f"| ghost fraction | {pct(ev.get('ghost_fraction'))} |",
+             f"| position error | {f(ev.get('position_error_px'), '.4f')} px, "
+             f"{f(ev.get('position_error_mm'), '.5f')} mm |",
+             f"| velocity error | {f(ev.get('velocity_error_mm_s'), '.3f')} mm/s ({pct(ev.get('velocity_error_rel'))} "
+             f"of the RMS speed) |",
+             f"| acceleration error | {f(ev.get('acceleration_error_mm_s2'), '.1f')} mm/s^2 "
+             f"({pct(ev.get('acceleration_error_rel'))}) |",
+             f"| correct tracks | {pct(ev.get('correct_track_fraction'))} |",
+             f"| tracks, mean length | {ev.get('n_tracks')}, {f(ev.get('mean_track_length'), '.1f')} frames |",
+             f"| Eulerian bins: RMS error of the mean velocity | {f(ev.get('binned_mean_error_mm_s'), '.3f')} mm/s |",
+             f"| calibration error (fitted vs true cameras) | {f(ev.get('calibration_error_px'), '.3f')} px |",
+             "", f"Matching radius {f(ev.get('match_radius_mm'), '.4f')} mm ({cfg.evaluate.radius_px:g} px).", ""]
+    why = ev.get("null_reasons") or {}
+    if why:
+        lines += ["Metrics without a value (n/a):", ""] + [f"- `{k}`: {v}" for k, v in why.items()] + [""]
+    lines += ["## Wall time per stage", "", *_timings_table(timings), ""]
+    lines += [f"![{n[:-4].replace('_', ' ')}]({n})\n" for n in figures]
     return Report("\n".join(lines), figures)
 
 

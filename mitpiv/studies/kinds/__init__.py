@@ -11,12 +11,12 @@ __all__ = ["KINDS", "get_kind"]
 
 
 def _kinds() -> dict[str, Kind]:
-    from mitpiv.studies.kinds import backlit, tomo
+    from mitpiv.studies.kinds import backlit, tomo, tracking
 
-    return {k.name: k for k in (tomo.KIND, backlit.KIND)}
+    return {k.name: k for k in (tomo.KIND, backlit.KIND, tracking.KIND)}
 
 
-KINDS: tuple[str, ...] = ("tomo", "backlit")
+KINDS: tuple[str, ...] = ("tomo", "backlit", "tracking")
 
 
 def get_kind(name, *, source: str = "experiment") -> Kind:

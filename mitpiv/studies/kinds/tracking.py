@@ -1,0 +1,780 @@
+"""Time-resolved Lagrangian particle tracking experiments (``kind = "tracking"``): a seeded
+flow advected over N frames, every frame rendered by the scene's cameras, the particle
+image model (OTF) calibrated from the images, Shake-The-Box over the sequence and the
+tracks scored with the LPT Challenge's metrics.
+
+Experiment file (paths relative to it; ``mitpiv schema --kind tracking`` lists every key)::
+
+    kind = "tracking"
+    name = "tracking-lpt"
+    seed = 0
+    [scene]        xml = "scene.xml"; params = { width = 320, height = 200 }
+    [seeding]      box_min_mm, box_max_mm, one of count | concentration_per_mm3 | ppp,
+                   diameter_um, reseed = "inflow" | "uniform", ...
+    [flow]         kind = "uniform" | "solid_body" | ... | "channel" (mitpiv.physics.flows), dt_s
+    [sequence]     frames (N), substeps (RK4 steps per frame)
+    [render]       spp, sensors, workers (frames in parallel), chunk_frames
+    [calibration]  model = "true" | "pinhole" (a fit to a noisy virtual target), noise_px
+    [otf]          source = "images" | "truth", subvolumes, window_px, frames
+    [tracking]     bounds_mm, tolerance_px, search_px, ... (mitpiv.tracking.stb.stb)
+    [evaluate]     radius_px, bin_mm
+    [output]       vtk = true: ParaView files of the tracks in RUN/vtk
+
+Stages: ``field`` (seeding and advection, :func:`mitpiv.physics.sequence.advect_sequence`;
+one PLY per frame and the truth in the one truth format, with identities, velocities and
+accelerations), ``render`` (EXR per camera and frame through
+:func:`mitpiv.render.render.render_scene`, the renderer of the tomo kind; chunks of frames in
+this process or, with ``[render] workers > 1``, on a local Dask cluster of processes, as
+``mitpiv sweep`` runs its points), ``calibrate`` (the cameras: the rendered images' own
+models, or pinhole fits to a virtual calibration target, :func:`mitpiv.reconstruct.calibration.calibrate`),
+``otf`` (:func:`mitpiv.tracking.otf.calibrate_otf` from particles triangulated in the
+images), ``track`` (:func:`mitpiv.tracking.stb.stb`; a sequence shorter than four frames is
+reconstructed frame by frame with IPR and has no velocities), ``evaluate``
+(:func:`mitpiv.tracking.metrics.track_metrics` and :func:`~mitpiv.tracking.metrics.bin_tracks`),
+``report`` (:func:`mitpiv.studies.report.tracking_report`) and ``vtk`` (with
+``[output] vtk = true``).
+
+The calibration runs after the rendering (the scene's cameras do not depend on it), so a
+changed calibration setting does not render again.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+from functools import cache
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from mitpiv.errors import CalibrationError, ConfigError
+from mitpiv.studies.kinds.tomo import SceneTable
+from mitpiv.studies.runner import RENDER_PACKAGES, Kind, Stage, StageContext
+from mitpiv.studies.schema import Table, Vec3, discriminated, model_from_signature
+
+PosFloat = Annotated[float, Field(gt=0)]
+PosInt = Annotated[int, Field(ge=1)]
+Bounds = tuple[float, float, float, float, float, float]
+
+#: Frames STB needs to start tracks; a shorter sequence is reconstructed frame by frame.
+STB_MIN_FRAMES = 4
+#: Most frames of one experiment (a bound on the truth arrays and the rendering).
+MAX_FRAMES = 2000
+
+
+# ------------------------------------------------------------------------------- schema
+class SeedingTable(Table):
+    """Particles seeded uniformly in a box and kept there at a constant count."""
+
+    box_min_mm: Vec3 = Field(..., description="lower corner of the seeding box [mm]; particles leaving it are dropped")
+    box_max_mm: Vec3 = Field(..., description="upper corner of the seeding box [mm]")
+    count: Annotated[int, Field(ge=0)] | None = Field(None, description="number of particles")
+    concentration_per_mm3: PosFloat | None = Field(None, description="particles per mm^3")
+    ppp: PosFloat | None = Field(None, description="particles per pixel of the density sensor")
+    density_sensor: str | None = Field(None, description="sensor id for ppp (default: the first rendered sensor)")
+    diameter_um: PosFloat = Field(1.0, description="particle diameter (median of a log-normal) [um]")
+    distribution: Literal["monodisperse", "lognormal"] = Field("monodisperse", description="diameter distribution")
+    geometric_std: Annotated[float, Field(gt=1)] = Field(1.5, description="geometric standard deviation (lognormal)")
+    proxy_radius_mm: PosFloat = Field(0.01, description="radius of the particles' proxy spheres in the scene [mm]")
+    reseed: Literal["inflow", "uniform"] = Field(
+        "inflow", description="where particles replacing those that left appear: at the inflow (points that crossed "
+        "the box boundary during the frame) or anywhere in the box")
+
+    @model_validator(mode="after")
+    def _one_density(self):
+        given = [k for k in ("count", "concentration_per_mm3", "ppp") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(f"give exactly one of count, concentration_per_mm3 or ppp; got {given or 'none'}")
+        if any(hi <= lo for lo, hi in zip(self.box_min_mm, self.box_max_mm, strict=True)):
+            raise ValueError(f"box_max_mm {list(self.box_max_mm)} must exceed box_min_mm {list(self.box_min_mm)} "
+                             "on every axis")
+        return self
+
+
+@cache
+def _flow_union():
+    from mitpiv.physics.flows import FLOW_KINDS
+
+    dt = (PosFloat, Field(..., description="time between consecutive frames [s]"))
+    models = {kind: model_from_signature(f"TrackingFlow_{kind}", cls, extra_fields={"dt_s": dt})
+              for kind, cls in FLOW_KINDS.items()}
+    return discriminated(models)
+
+
+class SequenceTable(Table):
+    """The time-resolved sequence."""
+
+    frames: Annotated[int, Field(ge=1, le=MAX_FRAMES)] = Field(
+        ..., description=f"number of frames N (STB needs >= {STB_MIN_FRAMES}; fewer: IPR per frame, no velocities)")
+    substeps: Annotated[int, Field(ge=1, le=1000)] = Field(8, description="RK4 steps per frame")
+
+
+class RenderTable(Table):
+    """Rendering (mitpiv.render.render.render_scene, as the tomo kind renders)."""
+
+    spp: PosInt | None = Field(None, description="samples per pixel / particle tracer passes (default the scene's)")
+    sensors: Annotated[list[str], Field(min_length=2)] | None = Field(
+        None, description="ids of the scene's sensors to render (default all; tracking needs >= 2)")
+    workers: Annotated[int, Field(ge=1, le=512)] = Field(
+        1, description="1: render in this process; more: a local Dask cluster of this many processes, one chunk "
+                       "of frames per task")
+    chunk_frames: Annotated[int, Field(ge=1, le=MAX_FRAMES)] = Field(
+        8, description="frames per rendering task (the scenes of a chunk are loaded together)")
+
+
+class CalibrationTable(Table):
+    """The cameras the tracker uses."""
+
+    model: Literal["true", "pinhole"] = Field(
+        "true", description="'true': the rendered images' camera models; 'pinhole': a pinhole fit (no distortion) to "
+        "a virtual target of points in the seeding box, their images perturbed by noise_px")
+    noise_px: Annotated[float, Field(ge=0)] = Field(
+        0.0, description="pinhole: standard deviation of the target points' image positions [px]")
+    points: Annotated[int, Field(ge=3, le=20)] = Field(
+        6, description="pinhole: target points per axis of the seeding box (points^3 in all)")
+
+
+class OtfTable(Table):
+    """Calibration of the particle image model (mitpiv.tracking.otf.calibrate_otf)."""
+
+    source: Literal["images", "truth"] = Field(
+        "images", description="3D positions of the fitted particles: triangulated in the images (as in an experiment) "
+        "or the true ones")
+    subvolumes: tuple[PosInt, PosInt, PosInt] = Field((1, 1, 1), description="sub-volumes (n_x, n_y, n_z)")
+    window_px: Annotated[int, Field(ge=1, le=10)] = Field(2, description="half width of the fitted window [px]")
+    frames: Annotated[int, Field(ge=1, le=MAX_FRAMES)] = Field(1, description="frames whose particles are fitted")
+    tolerance_px: PosFloat = Field(0.5, description="triangulation tolerance of the fitted particles [px]")
+
+
+class TrackingTable(Table):
+    """Shake-The-Box (mitpiv.tracking.stb.stb) and its IPR."""
+
+    bounds_mm: Bounds | None = Field(
+        None, description="measurement box [xmin, xmax, ymin, ymax, zmin, zmax] [mm] (default the seeding box)")
+    tolerance_px: PosFloat = Field(1.0, description="triangulation tolerance of IPR [px]")
+    search_px: PosFloat = Field(10.0, description="search radius from frame 0 to 1 around the velocity guess [px]")
+    predict_px: PosFloat = Field(1.5, description="search radius around extrapolated positions (initialisation) [px]")
+    max_shake_px: PosFloat = Field(1.0, description="a shaken particle farther than this from its prediction ends "
+                                                    "its track [px]")
+    velocity_guess_mm_s: Vec3 | None = Field(None, description="velocity guess of the initial linking [mm/s]")
+    shake_iterations: Annotated[int, Field(ge=1, le=50)] = Field(4, description="shaking per frame")
+    min_intensity: Annotated[float, Field(gt=0, lt=1)] = Field(0.1, description="particles below this fraction of "
+                                                                                "the median intensity are dropped")
+    outer_loops: Annotated[int, Field(ge=1, le=20)] = Field(4, description="IPR loops with all cameras")
+    reduced_loops: Annotated[int, Field(ge=0, le=5)] = Field(1, description="IPR loops with one camera left out")
+    regularise_window: Annotated[int, Field(ge=0, le=50)] = Field(
+        3, description="half window of the track regularisation [frames] (0: none, then no velocities)")
+
+    @model_validator(mode="after")
+    def _bounds(self):
+        b = self.bounds_mm
+        if b is not None and not (b[0] < b[1] and b[2] < b[3] and b[4] < b[5]):
+            raise ValueError(f"bounds_mm {list(b)} must be [xmin, xmax, ymin, ymax, zmin, zmax] with min < max")
+        return self
+
+
+class EvaluateTable(Table):
+    """Scoring against the truth (mitpiv.tracking.metrics)."""
+
+    radius_px: PosFloat = Field(1.0, description="match radius [px, object-space equivalent at the box centre]")
+    bin_mm: PosFloat | tuple[PosFloat, PosFloat, PosFloat] | None = Field(
+        None, description="Eulerian bin size [mm] (default: the measurement box in 4 x 4 x 4 bins)")
+
+
+class OutputTable(Table):
+    """Extra files a run writes beside its report."""
+
+    vtk: bool = Field(False, description="ParaView / VTK files of the tracks and true trajectories in RUN/vtk")
+
+
+class _Experiment(Table):
+    """Checks across tables."""
+
+    @model_validator(mode="after")
+    def _sizes(self):
+        from mitpiv import costs
+
+        if self.seeding.count is not None:
+            n = self.seeding.count * self.sequence.frames  # particle samples; truth: 3 arrays of 3 float64
+            costs.check_memory(costs.Cost(memory_bytes=2 * 9 * 8 * n, seconds=0.0, items=f"{n} particle samples"),
+                               what=f"[seeding] count = {self.seeding.count} over [sequence] frames = "
+                               f"{self.sequence.frames}", fix="seed fewer particles or render fewer frames", quiet=True)
+        return self
+
+
+@cache
+def schema():
+    """The tracking experiment model."""
+    from pydantic import create_model
+
+    fields = {
+        "kind": (Literal["tracking"], Field("tracking", description="experiment kind")),
+        "name": (str, Field(..., description="experiment name (default: the file name)")),
+        "seed": (Annotated[int, Field(ge=0, lt=2**63)], Field(0, description="experiment seed")),
+        "scene": (SceneTable, Field(..., description="the scene")),
+        "seeding": (SeedingTable, Field(..., description="particle seeding")),
+        "flow": (_flow_union(), Field(..., description="the flow (kind and its parameters) and dt_s")),
+        "sequence": (SequenceTable, Field(..., description="the time-resolved sequence")),
+        "render": (RenderTable, Field(default_factory=RenderTable, description="rendering")),
+        "calibration": (CalibrationTable, Field(default_factory=CalibrationTable, description="camera calibration")),
+        "otf": (OtfTable, Field(default_factory=OtfTable, description="particle image model calibration")),
+        "tracking": (TrackingTable, Field(default_factory=TrackingTable, description="Shake-The-Box")),
+        "evaluate": (EvaluateTable, Field(default_factory=EvaluateTable, description="scoring")),
+        "output": (OutputTable, Field(default_factory=OutputTable, description="extra output files")),
+    }
+    return create_model("TrackingExperiment", __base__=_Experiment,
+                        __doc__="A time-resolved particle tracking experiment: seeded flow over N frames, rendered, "
+                                "tracked by Shake-The-Box and scored.", **fields)
+
+
+def prepare(raw: dict, base_dir: Path) -> dict:
+    """Resolve the scene XML against the experiment's folder (before validation)."""
+    scene = raw.get("scene")
+    if isinstance(scene, dict) and isinstance(scene.get("xml"), str):
+        xml = (base_dir / scene["xml"]).resolve()
+        if not xml.is_file():
+            raise ConfigError(f"experiment: [scene] xml = {scene['xml']!r} does not exist (resolved to {xml}).")
+        raw = {**raw, "scene": {**scene, "xml": str(xml)}}
+    return raw
+
+
+# ------------------------------------------------------------------------------- helpers
+def bounds_of(cfg) -> tuple[np.ndarray, np.ndarray]:
+    """The measurement box (lower, upper) [mm]: [tracking] bounds_mm or the seeding box."""
+    b = cfg.tracking.bounds_mm
+    if b is None:
+        return np.asarray(cfg.seeding.box_min_mm, float), np.asarray(cfg.seeding.box_max_mm, float)
+    return np.array([b[0], b[2], b[4]], float), np.array([b[1], b[3], b[5]], float)
+
+
+def _scene_cameras(cfg, scratch: Path) -> dict:
+    """The scene's cameras by sensor id (the scene loaded with a one-particle placeholder)."""
+    from mitpiv.io import camera_from_metadata, write_particles_ply
+    from mitpiv.render.render import sensor_model
+    from mitpiv.render.scene import load_scene
+
+    scratch.mkdir()
+    try:
+        xml = scratch / "scene.xml"
+        shutil.copy(cfg.scene.xml, xml)
+        centre = 0.5 * (np.asarray(cfg.seeding.box_min_mm, float) + np.asarray(cfg.seeding.box_max_mm, float))
+        write_particles_ply(scratch / "particles_0.ply", centre[None], 1.0, proxy_radius_mm=0.01)
+        sc = load_scene(xml, frame=0, params=cfg.scene.params)
+        return {(x.id() or f"sensor{i}"): camera_from_metadata({"camera": sensor_model(x)})
+                for i, x in enumerate(sc.sensors())}
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _count(cfg, out: Path) -> int:
+    from mitpiv.physics.seeding import count_for_density
+    from mitpiv.streams import derived_seed
+
+    s = cfg.seeding
+    if s.count is not None:
+        return int(s.count)
+    if s.concentration_per_mm3 is not None:
+        return int(round(s.concentration_per_mm3 * np.prod(np.subtract(s.box_max_mm, s.box_min_mm))))
+    cams = _scene_cameras(cfg, out / ".density.tmp")
+    wanted = s.density_sensor or (cfg.render.sensors or [next(iter(cams))])[0]
+    if wanted not in cams:
+        raise ConfigError(f"experiment: [seeding] density_sensor = {wanted!r} is not in the scene; its sensors are "
+                          f"{sorted(cams)}.")
+    try:
+        return count_for_density(cams[wanted], s.box_min_mm, s.box_max_mm, ppp=s.ppp,
+                                 seed=derived_seed(cfg.seed, "density", wanted))
+    except ConfigError as e:
+        raise ConfigError(f"experiment: [seeding] density sensor {wanted!r}: {e}") from None
+
+
+def scene_files(cfg) -> list[Path]:
+    """The scene XML and the files it names (the tomo kind's rule)."""
+    from mitpiv.studies.kinds.tomo import scene_files as tomo_scene_files
+
+    return tomo_scene_files(cfg)
+
+
+def _truth(run: Path) -> dict:
+    from mitpiv.io import read_truth
+
+    return read_truth(run / "field" / "truth.npz")
+
+
+def _frame_files(run: Path, frame: int) -> list[Path]:
+    files = sorted((run / "render").glob(f"*_frame{frame:03d}.exr"))
+    if not files:
+        raise ConfigError(f"experiment: no images of frame {frame} in {run / 'render'}.")
+    return files
+
+
+def frame_images(run: Path, frame: int) -> tuple[list[np.ndarray], list[dict]]:
+    """The images (float64 (H, W)) and metadata of one frame, one per camera (sorted by id)."""
+    from mitpiv.io import read_exr
+
+    data = [read_exr(f) for f in _frame_files(run, frame)]
+    return [np.asarray(i if i.ndim == 2 else i[..., 0], dtype=np.float64) for i, _ in data], [m for _, m in data]
+
+
+def load_cameras(run: Path) -> list:
+    """The cameras the tracker uses (the calibrate stage's ``cameras.json``)."""
+    from mitpiv.io import camera_from_metadata, read_json
+
+    return [camera_from_metadata(c) for c in read_json(run / "calibrate" / "cameras.json")["cameras"]]
+
+
+def load_otf(run: Path):
+    from mitpiv.io import read_json
+    from mitpiv.tracking import OTF
+
+    return OTF.from_dict(read_json(run / "otf" / "otf.json"))
+
+
+def read_tracks(path):
+    """A :class:`~mitpiv.tracking.stb.Tracks` from the track stage's ``tracks.npz``."""
+    from mitpiv.io import read_npz
+    from mitpiv.tracking import Tracks
+
+    z = read_npz(path, what="tracks", required=("positions_mm", "intensities", "dt_s"))
+    return Tracks(z["positions_mm"], z["intensities"], float(z["dt_s"]), z.get("velocities_mm_s"),
+                  z.get("accelerations_mm_s2"), z.get("raw_positions_mm"))
+
+
+def write_tracks_npz(path, tracks) -> Path:
+    from mitpiv.io import write_npz
+
+    return write_npz(path, {"positions_mm": tracks.positions_mm, "intensities": tracks.intensities,
+                            "dt_s": np.float64(tracks.dt_s), "velocities_mm_s": tracks.velocities_mm_s,
+                            "accelerations_mm_s2": tracks.accelerations_mm_s2,
+                            "raw_positions_mm": tracks.raw_positions_mm}, owner="tracking")
+
+
+# ------------------------------------------------------------------------------- stages
+def stage_field(ctx: StageContext) -> dict:
+    from mitpiv.io import write_particles_ply, write_truth
+    from mitpiv.physics.flows import flow_from_dict
+    from mitpiv.physics.sequence import advect_sequence
+    from mitpiv.streams import generator
+
+    cfg, out = ctx.cfg, ctx.out
+    s = cfg.seeding
+    f = cfg.flow.model_dump()
+    dt = float(f.pop("dt_s"))
+    flow = flow_from_dict(f)
+    seq = advect_sequence(flow, box_min_mm=s.box_min_mm, box_max_mm=s.box_max_mm, n_frames=cfg.sequence.frames,
+                          dt_s=dt, count=_count(cfg, out), diameter_um=s.diameter_um, distribution=s.distribution,
+                          geometric_std=s.geometric_std, substeps=cfg.sequence.substeps, reseed=s.reseed,
+                          seed=generator(cfg.seed, "tracking-field"), progress=ctx.progress)
+    for k in range(cfg.sequence.frames):
+        p, d, _ = seq.frame(k)
+        write_particles_ply(out / f"particles_{k}.ply", p, d, proxy_radius_mm=s.proxy_radius_mm)
+    write_truth(out / "truth.npz", positions_mm=seq.positions_mm, times_s=seq.times_s, diameters_um=seq.diameters_um,
+                velocities_mm_s=seq.velocities_mm_s, accelerations_mm_s2=seq.accelerations_mm_s2, ids=seq.ids,
+                flow=flow.to_dict(), extra={"seed": cfg.seed, "box_min_mm": list(s.box_min_mm),
+                                            "box_max_mm": list(s.box_max_mm), "reseed": s.reseed})
+    present = seq.present
+    return {"n_particles": int(present[0].sum()), "n_identities": int(seq.ids.size), "frames": cfg.sequence.frames,
+            "entered": int(seq.ids.size - present[0].sum())}
+
+
+def render_chunk(xml: str, frames: list[int], params: dict, spp, seed: int, sensors, out_dir: str) -> list[str]:
+    """Render one chunk of frames (a module-level function: it runs in Dask workers too)."""
+    from mitpiv.render.render import render_scene
+
+    files = render_scene(xml, out_dir=out_dir, frames=frames, params=params, spp=spp, seed=seed, sensors=sensors)
+    (Path(out_dir) / "render.json").unlink(missing_ok=True)  # one index per chunk: the stage writes its own
+    return [f.name for f in files]
+
+
+def stage_render(ctx: StageContext) -> dict:
+    from mitpiv.io import write_json
+    from mitpiv.progress import bar
+
+    cfg = ctx.cfg
+    n = cfg.sequence.frames
+    # the scene reads particles_$frame.ply beside itself: the stage keeps its own copy of the
+    # XML and links the particle files beside it while it renders (as the tomo kind does)
+    xml = ctx.out / "scene.xml"
+    shutil.copy(cfg.scene.xml, xml)
+    links = []
+    r = cfg.render
+    chunks = [list(range(i, min(i + r.chunk_frames, n))) for i in range(0, n, r.chunk_frames)]
+    args = (str(xml), dict(cfg.scene.params), r.spp, cfg.seed, r.sensors, str(ctx.out))
+    names: list[str] = []
+    try:
+        for k in range(n):
+            src, dst = ctx.input("field", f"particles_{k}.ply"), ctx.out / f"particles_{k}.ply"
+            try:
+                os.link(src, dst)
+            except OSError:  # a file system without hard links
+                shutil.copy(src, dst)
+            links.append(dst)
+        with bar(len(chunks), desc="render frames", progress=ctx.progress, unit="chunk") as b:
+            if r.workers > 1 and len(chunks) > 1:
+                from dask.distributed import Client, LocalCluster, as_completed
+
+                with LocalCluster(n_workers=r.workers, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, Client(cluster) as client:
+                    futs = [client.submit(render_chunk, args[0], c, *args[1:], pure=False, retries=1) for c in chunks]
+                    for fut in as_completed(futs):
+                        names += fut.result()
+                        b.update()
+            else:
+                for c in chunks:
+                    names += render_chunk(args[0], c, *args[1:])
+                    b.update()
+    finally:
+        for f in links:
+            f.unlink(missing_ok=True)
+    names = sorted(names)
+    write_json(ctx.out / "render.json", {"scene": str(xml), "frames": list(range(n)), "files": names})
+    return {"images": len(names), "chunks": len(chunks), "workers": r.workers}
+
+
+def stage_calibrate(ctx: StageContext) -> dict:
+    from mitpiv.io import camera_from_metadata
+    from mitpiv.reconstruct.calibration import calibrate
+    from mitpiv.streams import generator
+
+    cfg = ctx.cfg
+    c = cfg.calibration
+    _, metas = frame_images(ctx.run_dir, 0)
+    ids = [m.get("sensor_id") for m in metas]
+    true = [camera_from_metadata(m) for m in metas]
+    if len(true) < 2:
+        raise ConfigError(f"experiment: tracking needs at least 2 cameras; the render stage made images of {ids}.")
+    if c.model == "true":
+        return _write_cameras(ctx.out, true, true, ids, [None] * len(true))
+    lo, hi = np.asarray(cfg.seeding.box_min_mm, float), np.asarray(cfg.seeding.box_max_mm, float)
+    axes = [np.linspace(lo[i], hi[i], c.points) for i in range(3)]
+    world = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    fitted, reports = [], []
+    for cam, sid in zip(true, ids, strict=True):
+        vis = cam.visible(world)
+        uv = cam.project(world[vis])
+        uv = uv + generator(cfg.seed, "calibration-noise", sid).normal(0.0, c.noise_px, uv.shape)
+        try:
+            mapping = calibrate(uv, world[vis], model="pinhole", resolution=cam.resolution, distortion="none",
+                                pixel_pitch_um=cam.pixel_pitch_um, max_rms_px=max(0.5, 5 * c.noise_px))
+        except CalibrationError as e:
+            raise CalibrationError(
+                f"experiment: [calibration] model = 'pinhole': camera {sid!r} ({int(vis.sum())} target points, "
+                f"noise_px = {c.noise_px}): {e} A narrow field of view (a long lens, a small crop) is nearly affine: "
+                f"with noisy points the linear start misplaces the principal point. Use model = 'true', a smaller "
+                f"noise_px or a larger crop.") from None
+        fitted.append(mapping.camera)
+        reports.append(mapping.fit_report)
+    return _write_cameras(ctx.out, fitted, true, ids, reports)
+
+
+def _write_cameras(out: Path, cams, true, ids, reports) -> dict:
+    from mitpiv.io import write_json
+
+    write_json(out / "cameras.json", {"ids": ids, "cameras": [c.to_dict() for c in cams],
+                                      "true": [c.to_dict() for c in true], "fit": reports})
+    err = [None if r is None else r.get("rms_px") for r in reports]
+    return {"cameras": ids, "fit_rms_px": err}
+
+
+def _calibration_error_px(cams, true, lo, hi) -> float:
+    """Largest reprojection difference [px] between fitted and true cameras over the box corners and centre."""
+    pts = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+                   + [0.5 * (lo + hi)])
+    return float(max(np.max(np.linalg.norm(c.project(pts) - t.project(pts), axis=1)) for c, t in
+                     zip(cams, true, strict=True)))
+
+
+def stage_otf(ctx: StageContext) -> dict:
+    from mitpiv.io import write_json
+    from mitpiv.tracking import calibrate_otf, detect_peaks, triangulate
+
+    cfg = ctx.cfg
+    o = cfg.otf
+    cams = load_cameras(ctx.run_dir)
+    lo, hi = bounds_of(cfg)
+    truth = _truth(ctx.run_dir) if o.source == "truth" else None
+    frames = range(min(o.frames, cfg.sequence.frames))
+    imgs_all, pts_all = [], []
+    for f in frames:
+        imgs, _ = frame_images(ctx.run_dir, f)
+        if o.source == "truth":
+            p = truth["positions_mm"][f]
+            p = p[np.all(np.isfinite(p), axis=1)]
+        else:
+            peaks = [detect_peaks(i)[0] for i in imgs]
+            p, _, _ = triangulate(peaks, cams, tolerance_px=o.tolerance_px, lower_mm=lo, upper_mm=hi)
+        imgs_all.append(imgs)
+        pts_all.append(p)
+    # one fit over all frames: the frames' images side by side share every camera's model
+    if len(imgs_all) == 1:
+        images, pts = imgs_all[0], pts_all[0]
+        otf = calibrate_otf(images, cams, pts, lower_mm=lo, upper_mm=hi, subvolumes=o.subvolumes,
+                            window_px=o.window_px)
+    else:
+        fits = [calibrate_otf(i, cams, p, lower_mm=lo, upper_mm=hi, subvolumes=o.subvolumes, window_px=o.window_px)
+                for i, p in zip(imgs_all, pts_all, strict=True)]
+        from mitpiv.tracking import OTF
+
+        otf = OTF(lo, hi, *(np.median([getattr(x, k) for x in fits], axis=0) for k in ("a", "b", "c", "peak")))
+    write_json(ctx.out / "otf.json", otf.to_dict())
+    return {"sigma_max_px": otf.sigma_max_px(), "peak": [float(np.median(otf.peak[k])) for k in range(otf.n_cameras)],
+            "fitted_from": int(sum(p.shape[0] for p in pts_all)), "source": o.source}
+
+
+def track_images(sequence, cameras, otf, *, dt_s: float, lower_mm, upper_mm, tracking, progress=None):
+    """Track a sequence (list of frames, each a list of per-camera images) with the
+    settings of a [tracking] table: STB for 4 frames or more; fewer, IPR per frame (every
+    particle a track of one frame, no velocities). Returns :class:`~mitpiv.tracking.stb.Tracks`."""
+    from mitpiv.tracking import Tracks, ipr, stb
+
+    t = tracking
+    opts = {"tolerance_px": t.tolerance_px, "outer_loops": t.outer_loops, "reduced_loops": t.reduced_loops}
+    if len(sequence) >= STB_MIN_FRAMES:
+        return stb(sequence, cameras, otf, dt_s=dt_s, lower_mm=lower_mm, upper_mm=upper_mm, search_px=t.search_px,
+                   predict_px=t.predict_px, max_shake_px=t.max_shake_px, velocity_guess=t.velocity_guess_mm_s,
+                   shake_iterations=t.shake_iterations, min_intensity=t.min_intensity, ipr_options=opts,
+                   regularise_window=t.regularise_window, progress=progress)
+    res = [ipr(imgs, cameras, otf, lower_mm=lower_mm, upper_mm=upper_mm, min_intensity=t.min_intensity, **opts)
+           for imgs in sequence]
+    n = sum(len(r) for r in res)
+    pos = np.full((n, len(sequence), 3), np.nan)
+    inten = np.full((n, len(sequence)), np.nan)
+    start = 0
+    for f, r in enumerate(res):
+        pos[start:start + len(r), f] = r.positions_mm
+        inten[start:start + len(r), f] = r.intensities
+        start += len(r)
+    return Tracks(pos, inten, float(dt_s), history=[{"frame": f, "particles": len(r)} for f, r in enumerate(res)])
+
+
+def stage_track(ctx: StageContext) -> dict:
+    cfg = ctx.cfg
+    cams = load_cameras(ctx.run_dir)
+    otf = load_otf(ctx.run_dir)
+    lo, hi = bounds_of(cfg)
+    seq = [frame_images(ctx.run_dir, f)[0] for f in range(cfg.sequence.frames)]
+    tr = track_images(seq, cams, otf, dt_s=cfg.flow.dt_s, lower_mm=lo, upper_mm=hi, tracking=cfg.tracking,
+                      progress=ctx.progress)
+    write_tracks_npz(ctx.out / "tracks.npz", tr)
+    lengths = tr.lengths
+    return {"n_tracks": tr.n_tracks, "mean_track_length": float(lengths.mean()) if lengths.size else 0.0,
+            "method": "stb" if cfg.sequence.frames >= STB_MIN_FRAMES else "ipr",
+            "history": tr.history}
+
+
+def _grid(cfg, lo, hi):
+    from mitpiv.grid import VoxelGrid
+
+    b = cfg.evaluate.bin_mm
+    vox = tuple((hi - lo) / 4) if b is None else (b if isinstance(b, tuple) else (b,) * 3)
+    return VoxelGrid.from_bounds(tuple(lo), tuple(hi), vox)
+
+
+def stage_evaluate(ctx: StageContext) -> dict:
+    from mitpiv.io import write_npz
+    from mitpiv.studies.kinds.tomo import null_metrics
+    from mitpiv.tracking import Tracks, bin_tracks, mm_per_px, track_metrics
+
+    cfg = ctx.cfg
+    run = ctx.run_dir
+    cams = load_cameras(run)
+    from mitpiv.io import camera_from_metadata, read_json
+
+    true_cams = [camera_from_metadata(c) for c in read_json(run / "calibrate" / "cameras.json")["true"]]
+    truth = _truth(run)
+    tracks = read_tracks(run / "track" / "tracks.npz")
+    lo, hi = bounds_of(cfg)
+    scale = mm_per_px(true_cams, 0.5 * (lo + hi))
+    radius = cfg.evaluate.radius_px * scale
+    pos = np.transpose(truth["positions_mm"], (1, 0, 2))
+    vel = truth["velocities_mm_s"]
+    acc = truth["accelerations_mm_s2"]
+    vel = None if vel is None or vel.ndim != 3 else np.transpose(vel, (1, 0, 2))
+    acc = None if acc is None else np.transpose(acc, (1, 0, 2))
+    m = track_metrics(tracks, pos, radius_mm=radius, truth_velocities_mm_s=vel, truth_accelerations_mm_s2=acc,
+                      cameras=true_cams, lower_mm=lo, upper_mm=hi)
+    per_frame = m.pop("per_frame")
+    hist = m.pop("length_histogram")
+    # the image density: particles in the box seen by the first camera, per pixel
+    w, h = true_cams[0].resolution
+    p0 = truth["positions_mm"][0]
+    p0 = p0[np.all(np.isfinite(p0), axis=1)]
+    m["ppp"] = float(true_cams[0].visible(p0).sum() / (w * h))
+    m["match_radius_mm"] = radius
+    m["mm_per_px"] = scale
+    m["n_tracks"] = tracks.n_tracks
+    lengths = tracks.lengths
+    m["mean_track_length"] = float(lengths.mean()) if lengths.size else float("nan")
+    m["calibration_error_px"] = _calibration_error_px(cams, true_cams, lo, hi)
+    # per-sample errors for the report and the VTK export
+    vel_err = np.full(tracks.positions_mm.shape[:2], np.nan)
+    if tracks.velocities_mm_s is not None and vel is not None:
+        from mitpiv.analysis.particles import assign
+
+        for f in range(tracks.n_frames):
+            q, ids = tracks.frame(f)
+            t = pos[:, f]
+            ok_t = np.flatnonzero(np.all(np.isfinite(t), axis=1))
+            pr = assign(q, t[ok_t], radius)
+            vel_err[ids[pr[:, 0]], f] = np.linalg.norm(tracks.velocities_mm_s[ids[pr[:, 0]], f]
+                                                       - vel[ok_t[pr[:, 1]], f], axis=1)
+    # Eulerian binning of the tracks and of the truth on the same grid
+    binned = {}
+    if tracks.velocities_mm_s is not None and vel is not None:
+        grid = _grid(cfg, lo, hi)
+        found = bin_tracks(tracks, grid)
+        ref = bin_tracks(Tracks(pos, np.ones(pos.shape[:2]), tracks.dt_s, vel, acc), grid)
+        both = (found["count"] > 0) & (ref["count"] > 0)
+        d = found["mean_mm_s"][both] - ref["mean_mm_s"][both]
+        m["binned_mean_error_mm_s"] = float(np.sqrt(np.mean(np.sum(d**2, axis=1)))) if d.size else float("nan")
+        m["binned_coverage"] = float(both.sum() / max(int((ref["count"] > 0).sum()), 1))
+        binned = {"bin_count": found["count"], "bin_mean_mm_s": found["mean_mm_s"], "bin_std_mm_s": found["std_mm_s"],
+                  "bin_true_mean_mm_s": ref["mean_mm_s"], "bin_origin_mm": np.asarray(grid.origin_mm, float),
+                  "bin_voxel_mm": np.asarray(grid.voxel_mm, float)}
+    write_npz(ctx.out / "errors.npz", {"velocity_error_mm_s": vel_err, "length_histogram": np.asarray(hist),
+                                       "yield_per_frame": np.array([p["yield"] for p in per_frame], float),
+                                       "ghost_per_frame": np.array([p["ghost_fraction"] for p in per_frame], float),
+                                       **binned}, owner="tracking")
+    short = cfg.sequence.frames < STB_MIN_FRAMES or cfg.tracking.regularise_window == 0
+    why = (f"a sequence of {cfg.sequence.frames} frame(s) is reconstructed frame by frame (STB needs "
+           f"{STB_MIN_FRAMES}): particles have no velocity" if cfg.sequence.frames < STB_MIN_FRAMES else
+           "[tracking] regularise_window = 0: the tracks carry no velocities")
+    reasons = {"velocity": why, "acceleration": why, "binned": why} if short else {}
+    reasons.update({"position_error": "no reconstructed particle matched a true one",
+                    "yield": "no true particle in the measurement box",
+                    "ghost_fraction": "no particle was reconstructed",
+                    "correct_track": "no track sample inside the measurement box",
+                    "velocity_error_rel": "the true velocities are all zero: a relative error is undefined",
+                    "acceleration_error_rel": "the true accelerations are all zero (e.g. a uniform flow): a relative "
+                                              "error is undefined",
+                    "": "not computable"})
+    for k in ("velocity_error_mm_s", "velocity_error_rel", "acceleration_error_mm_s2", "acceleration_error_rel",
+              "binned_mean_error_mm_s"):
+        if m.get(k) is None:
+            m[k] = float("nan")  # no value: None in the result, with its reason
+    out = null_metrics(m, reasons, where="tracking evaluate")
+    out["length_histogram"] = hist
+    out["per_frame"] = [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in p.items()}
+                        for p in per_frame]
+    return out
+
+
+def stage_report(ctx: StageContext) -> dict:
+    from mitpiv.studies import report
+
+    return report.write(report.tracking_report(ctx.cfg, ctx.run_dir, ctx.results, ctx.timings), ctx.out)
+
+
+def stage_vtk(ctx: StageContext) -> dict:
+    return {"files": [f.name for f in export_vtk(ctx.run_dir, ctx.out, progress=ctx.progress)]}
+
+
+def export_vtk(run_dir, out_dir=None, *, progress=None) -> list[Path]:
+    """ParaView files of a finished tracking run: ``tracks.vtu`` (the tracks as polylines:
+    ``time_s``, ``velocity_mm_s``, ``velocity_error_mm_s``), ``tracks_true.vtu`` (the true
+    trajectories: ``time_s``, ``velocity_mm_s``) and ``run.pvd``."""
+    from mitpiv.io.vtk import write_collection, write_tracks
+    from mitpiv.progress import bar
+
+    run = Path(run_dir)
+    out = Path(out_dir) if out_dir is not None else run / "vtk"
+    out.mkdir(parents=True, exist_ok=True)
+    for st in ("field", "track", "evaluate"):
+        if not (run / st / "stage.json").is_file():
+            from mitpiv.errors import FileFormatError
+
+            raise FileFormatError(f"export: the {st} stage of {str(run)!r} has not finished; run the experiment first.")
+    from mitpiv.io import read_npz
+
+    tr = read_tracks(run / "track" / "tracks.npz")
+    err = read_npz(run / "evaluate" / "errors.npz", what="errors")["velocity_error_mm_s"]
+    truth = _truth(run)
+    times = np.asarray(truth["times_s"], float)
+    files = []
+    with bar(2, desc="vtk", progress=progress, unit="file") as b:
+        present = tr.present
+        tid, fr = np.nonzero(present)
+        arrays = {"time_s": times[fr]}
+        if tr.velocities_mm_s is not None:
+            arrays["velocity_mm_s"] = np.nan_to_num(tr.velocities_mm_s[tid, fr])
+        arrays["velocity_error_mm_s"] = err[tid, fr]
+        files.append(write_tracks(out / "tracks.vtu", tr.positions_mm[tid, fr], tid.astype(np.int64), arrays))
+        b.update()
+        tp = truth["positions_mm"]
+        ok = np.all(np.isfinite(tp), axis=2)
+        fr2, pid = np.nonzero(ok)
+        order = np.lexsort((fr2, pid))
+        fr2, pid = fr2[order], pid[order]
+        arr2 = {"time_s": times[fr2]}
+        if truth["velocities_mm_s"] is not None and truth["velocities_mm_s"].ndim == 3:
+            arr2["velocity_mm_s"] = truth["velocities_mm_s"][fr2, pid]
+        files.append(write_tracks(out / "tracks_true.vtu", tp[fr2, pid], pid.astype(np.int64), arr2))
+        b.update()
+    files.append(write_collection(out / "run.pvd", [(f.name, 0.0) for f in files]))
+    return files
+
+
+def stages(cfg) -> list[Stage]:
+    dens = cfg.seeding.ppp is not None
+    out = [Stage("field", ("seed", "seeding", "flow", "sequence") + (("scene", "render") if dens else ()), stage_field,
+                 files=scene_files if dens else None, packages=RENDER_PACKAGES if dens else ()),
+           Stage("render", ("scene", "render"), stage_render, files=scene_files, packages=RENDER_PACKAGES),
+           Stage("calibrate", ("calibration",), stage_calibrate),
+           Stage("otf", ("otf", "tracking"), stage_otf),
+           Stage("track", ("tracking", "flow"), stage_track),
+           Stage("evaluate", ("evaluate",), stage_evaluate),
+           Stage("report", (), stage_report)]
+    if cfg.output.vtk:
+        out.append(Stage("vtk", ("output",), stage_vtk))
+    return out
+
+
+# ------------------------------------------------------------------------------- summary
+METRIC_KEYS = ("yield", "ghost_fraction", "position_error_px", "position_error_mm", "velocity_error_mm_s",
+               "velocity_error_rel", "acceleration_error_mm_s2", "acceleration_error_rel", "correct_track_fraction",
+               "mean_track_length", "n_tracks", "ppp", "binned_mean_error_mm_s", "calibration_error_px")
+
+
+def summary(cfg, results: dict) -> dict:
+    """metrics.json of a tracking run: the evaluate stage's metrics, the particle count and
+    the tracking method."""
+    ev = results.get("evaluate") or {}
+    return {"name": cfg.name, "seed": cfg.seed, "kind": "tracking", "evaluate": ev,
+            "n_particles": (results.get("field") or {}).get("n_particles"), "frames": cfg.sequence.frames,
+            "method": (results.get("track") or {}).get("method")}
+
+
+def row(metrics: dict) -> dict:
+    """The sweep-table columns: the LPT Challenge metrics (yield, ghost_fraction,
+    position_error_px, ...), ppp, n_particles, frames."""
+    ev = metrics.get("evaluate") or {}
+    out = {k: ev.get(k) for k in METRIC_KEYS}
+    out.update({"n_particles": metrics.get("n_particles"), "frames": metrics.get("frames"),
+                "method": metrics.get("method")})
+    return out
+
+
+def _pct(x):
+    return "n/a" if x is None else f"{100 * x:.1f} %"
+
+
+def _num(x, spec):
+    return "n/a" if x is None else format(x, spec)
+
+
+def headline(m: dict) -> str:
+    ev = m.get("evaluate") or {}
+    n = m.get("frames")
+    text = (f"{m['name']}: {n} frame{'' if n == 1 else 's'}, ppp {_num(ev.get('ppp'), '.4f')}, yield {_pct(ev.get('yield'))}, "
+            f"ghosts {_pct(ev.get('ghost_fraction'))}, position error {_num(ev.get('position_error_px'), '.3f')} px, "
+            f"velocity error {_pct(ev.get('velocity_error_rel'))}")
+    why = ev.get("null_reasons") or {}
+    if why:
+        text += f" (no value: {next(iter(why.values()))})"
+    return text
+
+
+KIND = Kind(name="tracking", build_schema=schema, stages=stages, summary=summary, row=row, prepare=prepare,
+            headline=headline, describe="time-resolved sequence, Shake-The-Box tracking and LPT Challenge metrics")

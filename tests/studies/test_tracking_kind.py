@@ -1,0 +1,164 @@
+"""The tracking experiment kind (kind = "tracking"): the tiny LPT-geometry run end to end
+(seeded flow over 6 frames, rendered, OTF from the images, STB, LPT Challenge metrics,
+report, VTK export), its schema errors, and the hard cases of issue 27: particles leaving
+and entering the volume, a camera that sees no particle in a frame, a sequence of one frame.
+
+The hard cases at the tracker's level use images from the OTF projector (no renderer): four
+pinhole cameras (50 mm, 10 um pixels, 160 x 160 px, 400 mm away) around a 10 x 10 x 5 mm box.
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mitpiv.errors import ConfigError
+from mitpiv.physics.camera import PinholeCamera, place_camera
+from mitpiv.physics.flows import Uniform
+from mitpiv.physics.sequence import advect_sequence
+from mitpiv.studies.kinds.tracking import TrackingTable, track_images
+from mitpiv.studies.runner import load_experiment, run_experiment
+from mitpiv.tracking import OTF, project_particles
+from mitpiv.tracking.metrics import track_metrics
+
+TINY = Path(__file__).resolve().parents[2] / "scenes" / "tracking_lpt" / "tiny.toml"
+
+# At 0.0025 ppp without noise the tracker should find nearly every particle (issue 27's
+# sparse IPR figure is 99 %); 0.9 leaves room for the first frames and the box edges.
+MIN_YIELD = 0.9
+MAX_GHOSTS = 0.05
+MAX_POSITION_ERROR_PX = 0.1  # the LPT Challenge's best trackers: < 0.1 px
+MAX_VELOCITY_ERROR_REL = 0.05  # of the RMS speed (noise-free images, 7-frame regularisation)
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    out = tmp_path_factory.mktemp("tracking_tiny")
+    return run_experiment(TINY, out), out
+
+
+def test_tiny_run_end_to_end(tiny):
+    res, out = tiny
+    ev = res["evaluate"]
+    assert res.kind == "tracking" and res["method"] == "stb" and res["frames"] == 6
+    assert ev["yield"] > MIN_YIELD and ev["ghost_fraction"] < MAX_GHOSTS
+    assert ev["position_error_px"] < MAX_POSITION_ERROR_PX
+    assert ev["velocity_error_rel"] < MAX_VELOCITY_ERROR_REL
+    assert ev["acceleration_error_rel"] is not None and "null_reasons" not in ev
+    assert 0.001 < ev["ppp"] < 0.005 and ev["n_tracks"] > 20
+    # particles left through x = -3 mm and entered at x = +3 mm, and were tracked there too
+    field = res.stages["field"]
+    assert field["entered"] > 0 and field["n_identities"] == field["n_particles"] + field["entered"]
+    assert min(p["yield"] for p in ev["per_frame"][2:]) > 0.8
+    # the sweep row holds the LPT Challenge columns
+    row = res.row()
+    for k in ("yield", "ghost_fraction", "position_error_px", "velocity_error_rel", "ppp", "seconds.total"):
+        assert row[k] is not None, k
+    # the truth keeps identities: a column is one particle, present over one run of frames
+    from mitpiv.io import read_truth
+
+    t = read_truth(out / "field" / "truth.npz")
+    present = np.all(np.isfinite(t["positions_mm"]), axis=2)
+    assert np.array_equal(t["ids"], np.arange(present.shape[1]))
+    assert t["velocities_mm_s"].shape == t["positions_mm"].shape == t["accelerations_mm_s2"].shape
+    starts = np.diff(np.vstack([np.zeros((1, present.shape[1]), bool), present]).astype(np.int8), axis=0) == 1
+    assert np.all(starts.sum(axis=0) == 1)
+    # the report's figures and the VTK export
+    for f in ("report.md", "tracks_velocity_error.png", "yield_per_frame.png", "track_lengths.png"):
+        assert (out / "report" / f).is_file(), f
+    from mitpiv.studies.export import export_vtk
+
+    files = export_vtk(out, out / "vtk")
+    assert [f.name for f in files] == ["tracks.vtu", "tracks_true.vtu", "run.pvd"]
+
+
+def test_pinhole_calibration_reruns_from_the_calibrate_stage_only(tiny, tmp_path):
+    import shutil
+
+    from mitpiv.studies.runner import run_config
+
+    res, out = tiny
+    run = tmp_path / "run"
+    shutil.copytree(out, run)
+    cfg = load_experiment(TINY, {"calibration.model": "pinhole", "calibration.points": 5})
+    res2 = run_config(cfg, run)
+    assert res2.timings["render"] == res.timings["render"]  # skipped: the same recorded time
+    ev = res2["evaluate"]
+    # fitted to exact target points: the cameras agree with the true ones to a micro-pixel
+    assert ev["calibration_error_px"] < 1e-3 and ev["yield"] > MIN_YIELD
+    assert all(r < 1e-3 for r in res2.stages["calibrate"]["fit_rms_px"])
+
+
+def test_a_run_of_one_frame_has_particles_but_no_velocities(tiny, tmp_path):
+    from mitpiv.errors import MitpivWarning
+
+    with pytest.warns(MitpivWarning, match="STB needs 4"):
+        res = run_experiment(TINY, tmp_path, overrides={"sequence.frames": 1})
+    ev = res["evaluate"]
+    assert res["method"] == "ipr" and ev["yield"] > MIN_YIELD and ev["ghost_fraction"] < MAX_GHOSTS
+    assert ev["velocity_error_mm_s"] is None and "STB needs 4" in ev["null_reasons"]["velocity_error_mm_s"]
+    assert "1 frame," in res.headline() and "n/a" in res.headline()
+
+
+@pytest.mark.parametrize("overrides, words", [
+    ({"sequence.frames": 0}, ["sequence", "frames"]),
+    ({"tracking.tolerance_pxx": 1.0}, ["tolerance_pxx", "tolerance_px"]),
+    ({"seeding.ppp": 0.01}, ["seeding", "exactly one"]),
+    ({"render.sensors": ["cam0"]}, ["render", "sensors"]),
+    ({"calibration.model": "polynomial"}, ["calibration", "model", "pinhole"]),
+    ({"tracking.bounds_mm": [1, 0, 0, 1, 0, 1]}, ["bounds_mm"]),
+])
+def test_schema_errors_name_the_key(overrides, words):
+    with pytest.raises(ConfigError) as e:
+        load_experiment(TINY, overrides)
+    for w in words:
+        assert w in str(e.value), (w, str(e.value))
+
+
+# --------------------------------------------------------------- hard cases, OTF images
+LO, HI = np.array([-5.0, -5.0, -2.5]), np.array([5.0, 5.0, 2.5])
+
+
+def rig(res=(160, 160)):
+    cams = []
+    for az, el in [(20, 25), (-20, 25), (20, -25), (-20, -25)]:
+        rot, pos = place_camera(azimuth_deg=az + 90, elevation_deg=el, distance_mm=400.0)
+        cams.append(PinholeCamera(resolution=res, focal_length_mm=50.0, pixel_pitch_um=10.0, rotation=rot,
+                                  position_mm=pos))
+    return cams
+
+
+def synthetic(frames, *, count=40, u=(40.0, 0.0, 0.0), dt=0.005, seed=2):
+    """A uniform translation (0.2 mm, ~1.2 px per frame) rendered by the OTF projector."""
+    cams = rig()
+    otf = OTF.uniform(4, sigma_px=1.0, lower_mm=LO, upper_mm=HI)
+    seq = advect_sequence(Uniform(velocity_mm_s=u), box_min_mm=LO, box_max_mm=HI, n_frames=frames, dt_s=dt,
+                          count=count, seed=seed)
+    images = [project_particles(seq.frame(f)[0], 1.0, cams, otf) for f in range(frames)]
+    return seq, images, cams, otf
+
+
+def score(tracks, seq):
+    return track_metrics(tracks, np.transpose(seq.positions_mm, (1, 0, 2)), radius_mm=0.05,
+                         truth_velocities_mm_s=np.transpose(seq.velocities_mm_s, (1, 0, 2)), lower_mm=LO, upper_mm=HI)
+
+
+def test_a_camera_that_sees_no_particle_in_one_frame():
+    seq, images, cams, otf = synthetic(6, count=30)
+    images[4][2] = np.zeros_like(images[4][2])  # camera 2 dropped frame 4
+    tr = track_images(images, cams, otf, dt_s=0.005, lower_mm=LO, upper_mm=HI, tracking=TrackingTable(
+        velocity_guess_mm_s=(40.0, 0.0, 0.0), search_px=3.0))
+    m = score(tr, seq)
+    assert np.isfinite(tr.positions_mm[tr.present]).all()
+    # the three other cameras carry frame 4: its particles are still found
+    assert m["per_frame"][4]["yield"] > 0.9 and m["per_frame"][4]["ghost_fraction"] < 0.05
+    assert m["yield"] > 0.9 and m["velocity_error_rel"] < 0.05
+
+
+def test_a_sequence_of_one_frame_is_reconstructed_without_velocities():
+    seq, images, cams, otf = synthetic(1)
+    tr = track_images(images, cams, otf, dt_s=0.005, lower_mm=LO, upper_mm=HI, tracking=TrackingTable())
+    assert tr.n_frames == 1 and tr.velocities_mm_s is None
+    m = score(tr, seq)
+    assert m["yield"] > 0.95 and m["ghost_fraction"] < 0.05
+    assert "velocity_error_mm_s" not in m  # no velocities: no velocity error (the kind reports None and why)
