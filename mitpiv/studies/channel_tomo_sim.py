@@ -27,13 +27,17 @@ Choices the paper leaves open (written down, not tuned):
   paper's "particle diameter of approximately three pixels"; a fixed physical size, so 2 px
   at 0.94 and 4 px at 0.47), all of the same energy (the Mie factor is per camera, as the
   paper's "scaling factor", not per particle);
-- exposure: a single particle centred on a pixel peaks at 200 counts in the brightest
-  camera of the set; the noise sigma is 10 % of that (the paper's "10 % of the global
-  peak particle intensity across all the cameras"), white, zero-mean, added after the
-  per-camera Mie scaling of the particle light (the camera noise does not depend on the
-  scattering angle, so each camera's signal-to-noise ratio follows its Mie factor: the
-  paper's own conclusion, ~11 % / ~16 % noise-to-peak forward / backward); overlapping
-  particles add and saturate at 255; the 8-bit ADC rounds and clips negative noise at 0;
+- exposure and noise: one exposure and one noise level for every camera of every
+  configuration: a single particle centred on a pixel peaks at 150 counts times the
+  camera's Mie factor, which is 1 for the reference camera (the paper's Table 2
+  normalisation: forward, theta 25, phi 60), and the noise sigma is 10 % of the reference
+  peak, 15 counts (the paper's "10 % of the global peak particle intensity across all the
+  cameras"), white and zero-mean, added after the Mie scaling of the particle light (the
+  camera noise does not depend on the scattering angle, so each camera's signal-to-noise
+  ratio follows its Mie factor: the paper's ~11 % / ~16 % noise-to-peak forward / backward
+  at the optimum, and its lower Q for an all-backward configuration); overlapping particles
+  add and saturate at 255 (a camera at theta 5 deg peaks at 230); the 8-bit ADC rounds and
+  clips negative noise at 0;
 - the Mie factor, ``mie="paper"``: the paper's own angular function, a quadratic in the
   azimuth theta (from the laser direction, 0-180 deg) fitted to its Table 2 maximum
   intensities (1.00, 0.62, 0.29, 0.15, 0.35, 0.68 at theta = 25, 45, 70, 110, 135, 155
@@ -41,9 +45,9 @@ Choices the paper leaves open (written down, not tuned):
   1.47) in air at 532 nm averaged over a uniform number distribution of 1-4 um
   (:mod:`mitpiv.physics.mie`) at each camera's true 3D scattering angle. They differ
   (physical: 9x between 59 and 121 deg; the paper's: 1.5x), see the replication report;
-- calibration target: Gaussian dots (sigma 1.2 px) on a 9 x 9 lattice spanning the
-  reconstructed box at five depths (-50, -25, 0, 25, 50 wall units), peak 200 counts on a
-  plate of 10 counts, 1 % noise; dots found by :func:`mitpiv.reconstruct.calibration.detect_dots`, labelled by the
+- calibration target: Gaussian dots (sigma 0.8 px) on a lattice of up to 9 x 9 spanning
+  the reconstructed box (fewer where the foreshortened pitch would fall below 6 px) at five
+  depths (-50, -25, 0, 25, 50 wall units), peak 150 counts on a plate of 7.5 counts, 1 % noise; dots found by :func:`mitpiv.reconstruct.calibration.detect_dots`, labelled by the
   design projection, fitted with the Soloff polynomial (cubic in x and y, quadratic in z;
   the paper's "third-order polynomial") by :func:`mitpiv.reconstruct.calibrate`;
 - pre-processing: :func:`mitpiv.reconstruct.preprocess_images` at the histogram's
@@ -80,6 +84,9 @@ log = logging.getLogger(__name__)
 #: Table 2 of the paper (phi = 60 deg): theta -> (mean, max) image intensity, normalised
 PAPER_TABLE_2 = {25: (0.81, 1.00), 45: (0.49, 0.62), 70: (0.23, 0.29), 110: (0.09, 0.15), 135: (0.27, 0.35),
                  155: (0.53, 0.68)}
+#: The reference camera of the exposure and the noise (Table 2's 1.00: forward, theta 25, phi 60)
+REFERENCE_THETA_DEG = 25.0
+REFERENCE_PHI_DEG = 60.0
 
 
 @dataclass(frozen=True)
@@ -96,13 +103,13 @@ class ChannelTomoSystem:
     window_plus: float = 20.0
     displacement_plus: float = 5.0
     noise_fraction: float = 0.10
-    peak_counts: float = 200.0
+    peak_counts: float = 150.0
     full_scale: int = 255
     iterations: int = 5
     preprocess_k: float = 0.0
     target_lattice: int = 9
     target_depths_plus: tuple = (-50.0, -25.0, 0.0, 25.0, 50.0)
-    target_dot_sigma_px: float = 1.2
+    target_dot_sigma_px: float = 0.8
     modes: int = 1000
     margin_px: int = 6
 
@@ -144,12 +151,13 @@ def _channel(u_tau, nu, yc, modes, seed):
 # ---------------------------------------------------------------------- Mie scaling
 def paper_mie_factor(theta_deg) -> np.ndarray:
     """The paper's angular scaling: a quadratic in the azimuth from the laser direction
-    (folded to 0-180 deg) least-squares fitted to its Table 2 maximum intensities."""
+    (folded to 0-180 deg) least-squares fitted to its Table 2 maximum intensities, divided by
+    its value at theta = 25 deg (the table's reference camera: 1.00)."""
     th = np.array(sorted(PAPER_TABLE_2), dtype=float)
     mx = np.array([PAPER_TABLE_2[t][1] for t in sorted(PAPER_TABLE_2)])
     c = np.polyfit(th, mx, 2)
     t = np.degrees(np.arccos(np.cos(np.radians(np.asarray(theta_deg, dtype=float)))))
-    return np.polyval(c, t)
+    return np.polyval(c, t) / np.polyval(c, REFERENCE_THETA_DEG)
 
 
 @lru_cache(maxsize=1)
@@ -164,10 +172,12 @@ def _physical_table():
 
 def physical_mie_factor(scattering_angle_deg) -> np.ndarray:
     """Lorenz-Mie differential cross-section of 1-4 um oil droplets (n = 1.47, uniform number
-    distribution, 61 sizes) in air at 532 nm, unpolarised, relative to its maximum, at the
-    scattering angles [deg] (linear interpolation in a 1-degree table)."""
+    distribution, 61 sizes) in air at 532 nm, unpolarised, at the scattering angles [deg]
+    (linear interpolation in a 1-degree table), relative to the reference camera (theta =
+    25, phi = 60 deg: scattering angle 63.0 deg)."""
     ang, v = _physical_table()
-    return np.interp(np.asarray(scattering_angle_deg, dtype=float), ang, v)
+    ref = math.degrees(math.acos(math.cos(math.radians(REFERENCE_PHI_DEG)) * math.cos(math.radians(REFERENCE_THETA_DEG))))
+    return np.interp(np.asarray(scattering_angle_deg, dtype=float), ang, v) / np.interp(ref, ang, v)
 
 
 # ---------------------------------------------------------------------- cameras
@@ -236,10 +246,10 @@ def _peak_of_table(table) -> float:
 
 def render_particles(cameras, factors, positions_mm, table, peak_counts: float) -> list[np.ndarray]:
     """Noise-free images [counts]: every particle a splat of ``table`` scaled so that a
-    particle centred on a pixel peaks at ``peak_counts * factor / max(factors)``."""
+    particle centred on a pixel peaks at ``peak_counts * factor`` (factor 1: the reference camera)."""
     from mitpiv.imaging import splat_points
 
-    scale = peak_counts / _peak_of_table(table) / float(np.max(factors))
+    scale = peak_counts / _peak_of_table(table)
     out = []
     for cam, f in zip(cameras, factors, strict=True):
         uv = cam.project(positions_mm)
@@ -256,15 +266,15 @@ def image_statistics(system: ChannelTomoSystem, configuration: str, theta_deg: f
                      mie: str, voxel_plus: float, crop_plus: float, n_i: float, seed: int) -> dict:
     """Noise-free image statistics of one configuration (the paper's Table 2): per camera the
     mean of the particles' peak pixels and the largest pixel [counts], before noise, with
-    every camera at ``peak_counts`` times its unnormalised Mie factor, so that different
-    configurations share one absolute scale; also the factors."""
+    every camera at ``peak_counts`` times its Mie factor (one absolute scale for all
+    configurations); also the factors."""
     poses = camera_poses(configuration, theta_deg, phi_deg)
     cams = [camera_for_pose(system, a, e, voxel_plus, crop_plus) for a, e in poses]
     fac = mie_factors(poses, mie)
     rng = np.random.default_rng(seed)
     pts = _seed(system, rng, crop_plus, phi_deg, n_i, extra_plus=0.0)
     table = particle_table(system.particle_sigma_plus / voxel_plus)
-    imgs = render_particles(cams, fac, pts, table, system.peak_counts * float(np.max(fac)))
+    imgs = render_particles(cams, fac, pts, table, system.peak_counts)
     means, maxes = [], []
     for cam, im in zip(cams, imgs, strict=True):
         uv = cam.project(pts)
@@ -286,7 +296,9 @@ def calibrate_pose(system: ChannelTomoSystem, azimuth_deg: float, elevation_deg:
     t0 = time.perf_counter()
     cam = camera_for_pose(system, azimuth_deg, elevation_deg, voxel_plus, crop_plus)
     lo, hi = system.box_mm(crop_plus)
-    g = np.linspace(0.0, 1.0, system.target_lattice)
+    # dots at least 6 px apart on the sensor: the sheet is foreshortened by sin(phi)
+    min_pitch = 6.0 * voxel_plus / math.sin(math.radians(abs(elevation_deg)))
+    g = np.linspace(0.0, 1.0, max(3, min(system.target_lattice, int(crop_plus / min_pitch) + 1)))
     xx, yy = np.meshgrid(lo[0] + g * (hi[0] - lo[0]), lo[1] + g * (hi[1] - lo[1]))
     table = particle_table(system.target_dot_sigma_px)
     rng = np.random.default_rng(seed)
@@ -367,8 +379,7 @@ def evaluate_point(system: ChannelTomoSystem, *, configuration: str, theta_deg: 
     vol_a, info = _reconstruct(system, maps, cams, factors, pts, table, grid, sigma, rng)
     t_rec = time.perf_counter() - t0
     truth = truth_volume(pts, grid, system.particle_sigma_plus / voxel_plus)
-    out = {"Q": float(quality_q(vol_a, truth)), "noise_to_peak": (sigma / (system.peak_counts * factors
-                                                                             / factors.max())).tolist(),
+    out = {"Q": float(quality_q(vol_a, truth)), "noise_to_peak": (sigma / (system.peak_counts * factors)).tolist(),
            "factors": factors.tolist(), "active": int(info["active_voxels"]), "particles": int(len(pts)),
            "grid": list(grid.shape), "reconstruct_s": t_rec}
     if piv:

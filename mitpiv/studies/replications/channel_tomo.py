@@ -72,9 +72,9 @@ def _f(v) -> str:
 def scale(quick: bool) -> dict:
     """The sweeps and crops of each scale (same code, same row ids)."""
     if quick:
-        return {"voxels": (0.63,), "stats_crop": 40.0, "seeds": (0,), "ni": (5.0, 10.0), "ni_crop": 40.0,
-                "sd_windows": (24, 32), "map_crop": 20.0, "thetas": (15.0, 25.0, 45.0), "phis": (40.0, 55.0, 70.0),
-                "map_configs": ("top",), "fb_thetas": (15.0, 25.0, 45.0), "fig16_crop": None, "fig16_thetas": ()}
+        return {"voxels": (0.63,), "stats_crop": 40.0, "seeds": (0,), "ni": (5.0,), "ni_crop": 40.0,
+                "sd_windows": (32,), "map_crop": 20.0, "thetas": (15.0, 25.0, 45.0), "phis": (40.0, 55.0, 70.0),
+                "map_configs": ("top",), "fb_thetas": (25.0,), "fig16_crop": None, "fig16_thetas": ()}
     thetas = (5.0, 15.0, 20.0, 25.0, 30.0, 35.0, 45.0, 55.0, 65.0, 75.0, 85.0)
     return {"voxels": VOXELS_PLUS, "stats_crop": 160.0, "seeds": (0, 1), "ni": (2.0, 3.5, 5.0, 7.0, 10.0, 12.5, 15.0,
                                                                                 20.0, 25.0),
@@ -526,7 +526,7 @@ def _method_section(sc, cal_rms, cals, est_full, est_quick, ctx) -> str:
         "synthetic turbulence: one-point statistics are the DNS's, the spectra a model's; `Channel.window_average` "
         "gives the window-filtered truth the paper calls 'averaged DNS'); particle images of 3 px at l_v+ = 0.63; "
         "N_I ~ 5 per (20+)^3; displacement 5+ (25 % of the window) at y+ = 150, first order (the paper's).\n\n"
-        "**Calibration in the loop.** Each camera pose renders a 9 x 9 dot target at five depths across the "
+        "**Calibration in the loop.** Each camera pose renders a dot target (up to 9 x 9 dots, at least 6 px apart on its sensor) at five depths across the "
         "sheet; dots are detected (`detect_dots`), labelled by the design projection and fitted with the Soloff "
         "polynomial (cubic in x and y, quadratic in z; the paper's eqs. 1-2 'third-order polynomial') by "
         f"least squares. Over {len(cals)} poses: fit RMS {np.median(cal_rms):.3f} px (median, max "
@@ -536,10 +536,13 @@ def _method_section(sc, cal_rms, cals, est_full, est_quick, ctx) -> str:
         "particle intensity across all the cameras ... the camera noise is independent of the scattering angle. "
         "Therefore, the signal-to-noise ratio in each camera varies'. Its wording 'added prior to application of "
         "the Mie scatter model' would scale the noise with the Mie factor and keep every camera's SNR equal, which "
-        "contradicts the next sentence and the ~11 % / ~16 % noise-to-peak it reports; we read it as: one noise "
-        "level for all cameras (10 % of the brightest camera's single-particle peak, 200 counts), the Mie factor "
-        "scaling only the particle light. The factor itself is the paper's own smooth angular function (a "
-        "quadratic in theta fitted to its Table 2 maxima), which reproduces its 11 % / 16 % (rows "
+        "contradicts the next sentence, the ~11 % / ~16 % noise-to-peak it reports and its lower Q for an "
+        "all-backward configuration (whose four cameras share one Mie factor: with a noise level relative to the "
+        "set's own peak it would equal the all-forward one). We read it as: one noise level for every camera of "
+        "every configuration, 10 % of the reference camera's single-particle peak (Table 2's normalisation, "
+        "forward at theta 25, phi 60; 150 counts, sigma 15), the Mie factor scaling only the particle light. The "
+        "factor itself is the paper's own smooth angular function (a quadratic in theta fitted to its Table 2 "
+        "maxima), which reproduces its 11 % / 16 % (rows "
         "noise_to_peak_*). With the Lorenz-Mie cross-section of the droplets the paper states, the backward "
         "cameras are ~9x darker and at 10 % noise their particles are at SNR ~1: run beside it "
         "(`..._physical_mie` rows and Fig. 20 curves) to show what the paper's model leaves out.\n\n"
