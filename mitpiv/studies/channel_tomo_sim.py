@@ -352,8 +352,10 @@ def evaluate_point(system: ChannelTomoSystem, *, configuration: str, theta_deg: 
     (Gaussian blobs of the particle image sigma), ``noise_to_peak`` per camera, ``active``
     voxels, and per window size ``piv[str(I)]``: ``y_plus``, statistics (``meas``, ``avg``
     the window-averaged truth, ``dns`` the point truth at the vector positions; each with U,
-    u_rms, v_rms, w_rms in wall units), ``err_avg`` / ``err_dns`` (percent, 100 < y+ < 200),
-    ``outliers``, ``n_vectors``; wall times [s].
+    u_rms, v_rms, w_rms in wall units), ``vectors`` (the valid vectors' y+ and their
+    measured / averaged / point velocities in wall units, local frame: streamwise,
+    wall-normal, spanwise; for statistics pooled over patches), ``err_avg`` / ``err_dns`` (percent, 100 < y+ < 200),
+    ``outliers``, ``n_vectors``; wall and CPU times [s] (``wall_s``, ``cpu_s``, ``reconstruct_s``).
     """
     from mitpiv.analysis.channel import field_wall_statistics, statistics_error_percent, wall_statistics
     from mitpiv.analysis.piv3d import piv3d
@@ -362,7 +364,7 @@ def evaluate_point(system: ChannelTomoSystem, *, configuration: str, theta_deg: 
     from mitpiv.physics.camera import PinholeCamera
     from mitpiv.reconstruct.mapping import CameraMapping
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     poses = camera_poses(configuration, theta_deg, phi_deg)
     if len(calibrations) != len(poses):
         raise ConfigError(f"evaluate_point: {len(calibrations)} calibrations for {len(poses)} cameras.")
@@ -395,15 +397,25 @@ def evaluate_point(system: ChannelTomoSystem, *, configuration: str, theta_deg: 
             p = field.points_mm().reshape(-1, 3)
             meas = field_wall_statistics(field, ch)
             win_mm = np.full(3, w * system.mm(voxel_plus))
-            avg = wall_statistics(p, ch.window_average(p, win_mm), ch)
-            dns = wall_statistics(p, ch.velocity(p, 0.0), ch)
+            v_avg, v_dns = ch.window_average(p, win_mm), ch.velocity(p, 0.0)
+            avg = wall_statistics(p, v_avg, ch)
+            dns = wall_statistics(p, v_dns, ch)
             keys = ("y_plus", "U", "u_rms", "v_rms", "w_rms")
+            use = field.valid.reshape(-1)
+            vel = np.stack([field.u, field.v, field.w], axis=-1).reshape(-1, 3)
+
+            def plus(v, use=use):  # world velocities [mm/s] -> local frame in wall units, 4 decimals
+                return np.round((np.asarray(v)[use] @ ch.frame.T) / ch.friction_velocity_mm_s, 4).tolist()
+
             out["piv"][str(w)] = {
                 "meas": {k: np.asarray(meas[k]).tolist() for k in keys},
                 "avg": {k: np.asarray(avg[k]).tolist() for k in keys},
                 "dns": {k: np.asarray(dns[k]).tolist() for k in keys},
+                "vectors": {"y_plus": np.round(ch.wall_distance_plus(p[use]), 4).tolist(), "meas": plus(vel),
+                            "avg": plus(v_avg), "dns": plus(v_dns)},
                 "err_avg": statistics_error_percent(meas, avg), "err_dns": statistics_error_percent(meas, dns),
                 "outliers": float(field.outlier_ratio), "n_vectors": int(field.n_vectors),
                 "window_plus": w * voxel_plus}
     out["wall_s"] = time.perf_counter() - t0
+    out["cpu_s"] = time.process_time() - c0
     return out

@@ -72,20 +72,22 @@ def _f(v) -> str:
 def scale(quick: bool) -> dict:
     """The sweeps and crops of each scale (same code, same row ids)."""
     if quick:
-        return {"voxels": (0.63,), "stats_crop": 40.0, "seeds": (0,), "ni": (5.0,), "ni_crop": 40.0,
+        return {"voxels": (0.63,), "stats_crop": 40.0, "seeds": (0,), "ni_seeds": (0,), "ni": (5.0,), "ni_crop": 40.0,
                 "sd_windows": (32,), "map_crop": 20.0, "thetas": (15.0, 25.0, 45.0), "phis": (40.0, 55.0, 70.0),
                 "map_configs": ("top",), "fb_thetas": (25.0,), "fig16_crop": None, "fig16_thetas": ()}
     thetas = (5.0, 15.0, 20.0, 25.0, 30.0, 35.0, 45.0, 55.0, 65.0, 75.0, 85.0)
-    return {"voxels": VOXELS_PLUS, "stats_crop": 160.0, "seeds": (0, 1), "ni": (2.0, 3.5, 5.0, 7.0, 10.0, 12.5, 15.0,
-                                                                                20.0, 25.0),
-            "ni_crop": 100.0, "sd_windows": (24, 32, 48), "map_crop": 40.0, "thetas": thetas,
+    return {"voxels": VOXELS_PLUS, "stats_crop": 80.0, "seeds": tuple(range(8)), "ni_seeds": (0, 1, 2),
+            "ni": (2.0, 3.5, 5.0, 7.0, 10.0, 12.5, 15.0, 20.0, 25.0),
+            "ni_crop": 80.0, "sd_windows": (24, 32, 48), "map_crop": 40.0, "thetas": thetas,
             "phis": (20.0, 30.0, 40.0, 50.0, 55.0, 60.0, 70.0, 80.0, 85.0), "map_configs": CONFIGS,
             "fb_thetas": thetas, "fig16_crop": 80.0, "fig16_thetas": thetas}
 
 
-#: measured seconds per point on one core of the 2-core machine (quick runs and a 40+ point),
-#: per million voxels and frame (SMART + rendering + PIV), and per calibration
-SECONDS_PER_MVOXEL_FRAME = 12.0
+#: single-core rates, measured on the 2-core machine under a load of ~4 (wall times divided by
+#: the load): SMART + rendering per million voxels and frame; NCC PIV per vector and pass for a
+#: 32-voxel window (scaling with the window's volume); one pose's calibration
+SECONDS_PER_MVOXEL_FRAME = 8.0
+SECONDS_PER_VECTOR_32 = 0.012
 SECONDS_PER_CALIBRATION = 0.4
 
 
@@ -108,7 +110,7 @@ def _points(sc: dict) -> dict:
         for s in sc["seeds"]:
             add("symmetric", 25.0, 55.0, lv, sc["stats_crop"], 5.0, s, "paper", w)
     for ni in sc["ni"]:
-        for s in sc["seeds"]:
+        for s in sc["ni_seeds"]:
             add("symmetric", 25.0, 55.0, 0.63, sc["ni_crop"], ni, s, "paper", sc["sd_windows"])
     for config in sc["map_configs"]:
         for t in sc["thetas"]:
@@ -139,12 +141,22 @@ def cost_estimate(quick: bool) -> dict:
     pts = _points(scale(quick))
 
     def mvox(it):
-        n = (it["crop"] / it["lv"]) ** 2 * (s.sheet_plus / it["lv"])
-        return n / 1e6
+        return (it["crop"] / it["lv"]) ** 2 * (s.sheet_plus / it["lv"]) / 1e6
+
+    def piv_s(it):
+        n = it["crop"] / it["lv"]
+        m = s.sheet_plus / it["lv"]
+        t = 0.0
+        for w in it["windows"]:
+            for ww in (1.5 * w, w):  # the predictor pass and the final one, 75 % overlap
+                step = 0.25 * ww
+                vec = max(1, (n - ww) / step + 1) ** 2 * max(1, (m - ww) / step + 1)
+                t += vec * SECONDS_PER_VECTOR_32 * (ww / 32) ** 3
+        return t
 
     t_cal = len(pts["cal"]) * SECONDS_PER_CALIBRATION
     t_q = sum(mvox(it) * SECONDS_PER_MVOXEL_FRAME for it in pts["q"])
-    t_piv = sum(2.5 * mvox(it) * SECONDS_PER_MVOXEL_FRAME for it in pts["piv"])
+    t_piv = sum(2 * mvox(it) * SECONDS_PER_MVOXEL_FRAME + piv_s(it) for it in pts["piv"])
     return {"calibrations": len(pts["cal"]), "q_points": len(pts["q"]), "piv_points": len(pts["piv"]),
             "cpu_s": t_cal + t_q + t_piv, "cal_s": t_cal, "q_s": t_q, "piv_s": t_piv}
 
@@ -209,14 +221,35 @@ def run(ctx) -> ReplicationResult:
     _table2_part(ctx, sc, rows, curves, sections, system)
     cal_rms = [c["rms_px"] for c in cals]
     est_full, est_quick = cost_estimate(False), cost_estimate(True)
-    sections.insert(0, _method_section(sc, cal_rms, cals, est_full, est_quick, ctx))
+    cpu = sum(float(r.get("cpu_s", r.get("wall_s", 0.0))) for r in res) + sum(float(c["wall_s"]) for c in cals)
+    sections.insert(0, _method_section(sc, cal_rms, cals, est_full, est_quick, ctx)
+                    + f" Measured: {cpu:.0f} s of single-core time in the points of this run "
+                    f"({len(cals)} calibrations, {len(res)} points; cached points count their first run).")
     for c in curves.values():
         c.y = {k: [None if (v is None or not math.isfinite(v)) else v for v in ys] for k, ys in c.y.items()}
     return ReplicationResult(rows=rows, curves=curves, sections=sections, figures=figures)
 
 
-def _stat_of(r: dict, w: int) -> dict:
-    return r["piv"][str(int(w))]
+def pooled_statistics(results: list[dict], window: int) -> dict:
+    """Wall-unit statistics of the vectors of several patches (independent realisations of
+    the synthetic turbulence) pooled per vector layer, for the measurement and both truths,
+    and the Table 1 errors (:func:`mitpiv.analysis.channel.statistics_error_percent`)."""
+    from mitpiv.analysis.channel import statistics_error_percent, wall_statistics
+    from mitpiv.studies.channel_tomo_sim import ChannelTomoSystem
+
+    system = ChannelTomoSystem()
+    ch = system.channel(0)  # the frame and the wall units (the same for every realisation)
+    vec = [r["piv"][str(int(window))]["vectors"] for r in results]
+    y = np.concatenate([v["y_plus"] for v in vec])
+    pts = ch.center_mm + ((y - system.center_y_plus) * system.l_nu_mm)[:, None] * ch.wall_normal
+    out = {}
+    for ref in ("meas", "avg", "dns"):
+        vel = np.concatenate([np.asarray(v[ref], dtype=float).reshape(-1, 3) for v in vec])
+        st = wall_statistics(pts, vel @ ch.frame * ch.friction_velocity_mm_s, ch)
+        out[ref] = {k: np.asarray(st[k]).tolist() for k in ("y_plus", "n", "U", "u_rms", "v_rms", "w_rms", "uv")}
+    out["err_avg"] = statistics_error_percent(out["meas"], out["avg"])
+    out["err_dns"] = statistics_error_percent(out["meas"], out["dns"])
+    return out
 
 
 def _stats_part(ctx, sc, get, rows, curves, figures, sections, system):
@@ -227,12 +260,12 @@ def _stats_part(ctx, sc, get, rows, curves, figures, sections, system):
     for lv in sc["voxels"]:
         w = sc["sd_windows"] if (lv == 0.63 and sc["stats_crop"] == sc["ni_crop"]) else (int(round(20 / lv)),)
         wi = int(round(20 / lv))
-        per = [_stat_of(get("symmetric", 25.0, 55.0, lv, sc["stats_crop"], 5.0, s, "paper", w), wi)
-               for s in sc["seeds"]]
-        prof[lv] = per[0]
+        pooled = pooled_statistics([get("symmetric", 25.0, 55.0, lv, sc["stats_crop"], 5.0, s, "paper", w)
+                                    for s in sc["seeds"]], wi)
+        prof[lv] = pooled
         for ref in ("avg", "dns"):
             for name, key in STAT_KEY.items():
-                errs[ref][name].append(float(np.mean([p["err_" + ref][key] for p in per])))
+                errs[ref][name].append(pooled["err_" + ref][key])
     lvs = list(sc["voxels"])
     for ref in ("avg", "dns"):
         curves[f"error_{ref}_vs_voxel"] = Curve(lvs, {n: errs[ref][n] for n in STAT_KEY}, "l_v+",
@@ -318,11 +351,13 @@ def _seeding_part(ctx, sc, get, rows, curves, figures, sections):
     sd_err = {w: [] for w in sc["sd_windows"]}
     sd_x = {w: [] for w in sc["sd_windows"]}
     for v in ni:
-        per = [get("symmetric", 25.0, 55.0, 0.63, sc["ni_crop"], v, s, "paper", sc["sd_windows"]) for s in sc["seeds"]]
+        per = [get("symmetric", 25.0, 55.0, 0.63, sc["ni_crop"], v, s, "paper", sc["sd_windows"])
+               for s in sc["ni_seeds"]]
+        e32 = pooled_statistics(per, 32)["err_avg"]
         for name, key in STAT_KEY.items():
-            err[name].append(float(np.mean([_stat_of(p, 32)["err_avg"][key] for p in per])))
+            err[name].append(e32[key])
         for w in sc["sd_windows"]:
-            sd_err[w].append(float(np.mean([_stat_of(p, w)["err_avg"]["u_rms"] for p in per])))
+            sd_err[w].append(pooled_statistics(per, w)["err_avg"]["u_rms"])
             # particles per window at this density: N_I (per (20+)^3) x (w l_v+ / 20)^3
             sd_x[w].append(s_d(v * (w * 0.63 / 20.0) ** 3, w))
     curves["error_vs_NI"] = Curve(ni, err, "N_I (particles per (20+)^3)", "error vs averaged truth [%]")
@@ -436,8 +471,9 @@ def _camera_part(ctx, sc, get, rows, curves, figures, sections, system):
         for t in sc["fig16_thetas"]:
             rr = get("top", t, 55.0, 0.63, sc["fig16_crop"], 5.0, 0, "paper", (32,))
             qs.append(rr["Q"])
-            eu.append(_stat_of(rr, 32)["err_avg"]["u_rms"])
-            ew.append(_stat_of(rr, 32)["err_avg"]["v_rms"])
+            e = pooled_statistics([rr], 32)["err_avg"]
+            eu.append(e["u_rms"])
+            ew.append(e["v_rms"])
         curves["error_vs_Q_phi55"] = Curve(qs, {"uprime": eu, "wprime": ew}, "Q", "error vs averaged truth [%]")
         rho = float(np.corrcoef(qs, eu)[0, 1]) if len(qs) > 2 else float("nan")
         rows.append(compare_trend("error_falls_with_Q", "correlation of u'+ error with Q over theta at phi = 55",
