@@ -183,10 +183,10 @@ def physical_mie_factor(scattering_angle_deg) -> np.ndarray:
 # ---------------------------------------------------------------------- cameras
 def camera_poses(configuration: str, theta_deg: float, phi_deg: float) -> list[tuple[float, float]]:
     """(azimuth, elevation) [deg] of the four cameras (:func:`quadrant_arrangement`)."""
-    from mitpiv.physics.sphere_cameras import _angles
+    from mitpiv.physics.sphere_cameras import quadrant_arrangement
 
-    az, el = _angles(configuration, float(theta_deg), float(phi_deg))
-    return [(float(a), float(e)) for a, e in zip(az, el, strict=True)]
+    cams = quadrant_arrangement(configuration, theta_deg=float(theta_deg), phi_deg=float(phi_deg), distance_mm=1.0)
+    return [(c["azimuth_deg"], c["elevation_deg"]) for c in cams]
 
 
 def camera_for_pose(system: ChannelTomoSystem, azimuth_deg: float, elevation_deg: float, voxel_plus: float,
