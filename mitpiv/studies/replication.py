@@ -181,6 +181,9 @@ class ReplicationContext:
     seed: int = 0
     workers: int = 1
     progress: Progress = None
+    #: points computed by this invocation and points read back from an earlier run's cache
+    n_computed: int = 0
+    n_cached: int = 0
 
     @property
     def work(self) -> Path:
@@ -200,7 +203,9 @@ class ReplicationContext:
 
         f = self._cache_file(key)
         if f.is_file():
+            self.n_cached += 1
             return read_json(f)
+        self.n_computed += 1
         result = fn()
         write_json(f, result)
         return read_json(f)
@@ -220,6 +225,8 @@ class ReplicationContext:
         files = [self._cache_file(k) for k in keys]
         results: dict[int, dict] = {i: read_json(f) for i, f in enumerate(files) if f.is_file()}
         todo = [i for i in range(len(items)) if i not in results]
+        self.n_cached += len(results)
+        self.n_computed += len(todo)
         log.info("replication %s: %s: %d points, %d done earlier", self.name, desc, len(items), len(results))
         with bar(len(todo), desc=f"{self.name}: {desc}", progress=self.progress, unit="point") as b:
             if self.workers > 1 and len(todo) > 1:
@@ -360,6 +367,7 @@ def write_outputs(study: Study, ctx: ReplicationContext, result: ReplicationResu
     results = {
         "study": study.name, "title": study.title, "paper": study.paper, "scale": scale, "commit": _commit(),
         "mitpiv_version": __version__, "command": command, "wall_s": round(float(wall_s), 1),
+        "points": {"computed": ctx.n_computed, "from_cache": ctx.n_cached},
         "rows": [asdict(r) for r in result.rows],
         "curves": {k: (c.to_dict() if isinstance(c, Curve) else c) for k, c in result.curves.items()},
     }
@@ -371,7 +379,9 @@ def write_outputs(study: Study, ctx: ReplicationContext, result: ReplicationResu
     md = [f"# Replication: {study.title}", "",
           f"- Study: `{study.name}`; paper: `{study.paper}` (in the project's shared seeds folder)",
           f"- Command: `{command}`",
-          f"- Scale: {scale}; wall time {wall_s:.0f} s on {_machine()}; commit `{results['commit']}`",
+          f"- Scale: {scale}; wall time {wall_s:.0f} s on {_machine()}; commit `{results['commit']}`"
+          + (f" ({ctx.n_computed} points computed by this run, {ctx.n_cached} read back from the cache of earlier "
+             "runs of the same command)" if ctx.n_cached else ""),
           f"- Agreement: {n_ok} of {n_cmp} compared rows agree within their tolerance", "",
           "## Paper vs ours", "", _table(result.rows), ""]
     for s in result.sections:

@@ -205,6 +205,19 @@ def calibrate_from_targets(system: SapivSystem, cameras, table, *, distortion: s
 
 
 # ---------------------------------------------------------------------- one point
+#: k of the paper's threshold mu + k sigma (section 2.4: "three standard deviations")
+THRESHOLD_K = 3.0
+#: thresholds of the density-trend diagnosis: mu + k sigma (0: none) and fixed intensities
+DIAGNOSIS_K = (0.0, 1.0, 2.0, 3.0, 5.0, 8.0)
+DIAGNOSIS_ABS = (0.02, 0.05, 0.1, 0.2)
+
+
+def _threshold(raw, mu, sigma, k: float):
+    """Zero every voxel of each plane at or below ``mu + k sigma`` of that plane (rows: planes)."""
+    t = (np.asarray(mu) + k * np.asarray(sigma))[:, None]
+    return np.where(raw > t, raw, 0.0).astype(raw.dtype, copy=False)
+
+
 def patch_centres(n_side: int, pitch_mm: float) -> list[tuple[float, float]]:
     """``n_side x n_side`` patch centres on a square lattice of ``pitch_mm`` centred on the axis."""
     c = (np.arange(n_side) - (n_side - 1) / 2) * pitch_mm
@@ -212,7 +225,8 @@ def patch_centres(n_side: int, pitch_mm: float) -> list[tuple[float, float]]:
 
 
 def evaluate_point(system: SapivSystem, cameras, mappings, table, *, density_per_mm3: float, seed: int,
-                   patches, patch_mm: float, warp: str = "homography", progress=None) -> dict:
+                   patches, patch_mm: float, warp: str = "homography", threshold_diagnosis: bool = False,
+                   progress=None) -> dict:
     """Seed, image, refocus, threshold and score one configuration at one density.
 
     Particles are seeded uniformly in the whole volume (a Poisson number for
@@ -225,6 +239,12 @@ def evaluate_point(system: SapivSystem, cameras, mappings, table, *, density_per
     Returns a dict: Q (eq. 4.1), Qprime (eq. 4.2) against Gaussian blobs of
     ``truth_sigma_voxels``, Q_point and Qprime_point against the voxel-occupancy truth, SNR (eq. 4.3), mu / sigma (means over the
     planes of the normal fit to the noise part), mu_all / sigma_all (of the whole planes), particles, voxels and wall times [s].
+
+    With ``threshold_diagnosis`` the raw planes are kept and Q is also returned for other
+    thresholds (the metrics above are unchanged up to float32 rounding at the threshold): ``Q_by_k`` (threshold mu + k sigma per
+    plane, k = 0 meaning no threshold) and ``Q_by_abs`` (one fixed threshold in image
+    intensity for all planes and densities; a particle's energy is 1, so the in-focus peak
+    does not depend on the density while mu + 3 sigma does).
     """
     from mitpiv.analysis.quality import occupancy_volume, quality_q, rank_correlation, snr_from_fits, truth_volume
     from mitpiv.imaging import splat_points
@@ -263,7 +283,12 @@ def evaluate_point(system: SapivSystem, cameras, mappings, table, *, density_per
         uv = cam.project(p)
         imgs.append(splat_points(uv, res, table))
     t_render = time.perf_counter() - t0
-    rf = refocus_planes(imgs, mappings, np.concatenate(xy), system.z_planes_mm, warp=warp, progress=progress)
+    rf = refocus_planes(imgs, mappings, np.concatenate(xy), system.z_planes_mm, warp=warp, progress=progress,
+                        threshold_k=None if threshold_diagnosis else THRESHOLD_K)
+    raw = None
+    if threshold_diagnosis:  # the same thresholded planes refocus_planes would return, raw kept aside
+        raw = rf.planes
+        rf.planes = _threshold(raw, rf.mu, rf.sigma, THRESHOLD_K)
     t_refocus = time.perf_counter() - t0 - t_render
     # the true volume, patch by patch, in the same voxel order as the refocused points
     occ, blob = [], []
@@ -292,6 +317,12 @@ def evaluate_point(system: SapivSystem, cameras, mappings, table, *, density_per
         "t_refocus_s": t_refocus,
         "t_metrics_s": time.perf_counter() - t_m,
     }
+    if raw is not None:
+        out["Q_by_k"] = {f"{k:g}": quality_q(raw if k == 0 else _threshold(raw, rf.mu, rf.sigma, k), vb)
+                         for k in DIAGNOSIS_K}
+        out["Q_by_abs"] = {f"{t:g}": quality_q(np.where(raw > t, raw, 0.0), vb) for t in DIAGNOSIS_ABS}
+        out["threshold_k3_mean"] = float(np.mean(rf.mu + THRESHOLD_K * rf.sigma))
+        out["raw_peak_mean"] = float(np.mean(rf.peak))
     out["t_total_s"] = time.perf_counter() - t0
     out["cpu_s"] = time.process_time() - c0
     return out

@@ -90,6 +90,7 @@ def test_results_and_report_follow_the_contract(toy, tmp_path):
     assert "| `mean_n4` |" in md and "**no**" in md and "2 of 3 compared rows agree" in md
     assert "![mean.png](mean.png)" in md and (tmp_path / "q" / "mean.png").stat().st_size > 1000
     assert "--quick" in res["command"]
+    assert res["points"] == {"computed": 3, "from_cache": 0} and "read back" not in md
 
 
 def test_points_resume_from_the_cache(toy, tmp_path):
@@ -100,6 +101,9 @@ def test_points_resume_from_the_cache(toy, tmp_path):
     assert CALLS == [8]
     res = json.loads((tmp_path / "r" / "results.json").read_text())
     assert res["scale"] == "full" and res["curves"]["mean"]["y"]["ours"] == [1.5, 2.5, 4.5]
+    # n=8 computed; n=2, n=4 and the "once" value read back: the report says so beside the wall time
+    assert res["points"] == {"computed": 1, "from_cache": 3}
+    assert "1 points computed by this run, 3 read back" in (tmp_path / "r" / "report.md").read_text()
 
 
 def test_contract_violations_are_refused(toy, tmp_path, monkeypatch):
