@@ -117,6 +117,12 @@ def preprocess_images(images, *, k: float = 2.0) -> list[np.ndarray]:
     sigma`` become exactly zero, which is what lets MART prune the volume; the rest keep
     their excess over that level. A noise-free image (mode ~0, sigma ~0) keeps its light.
 
+    When at least :data:`CLIPPED_FLOOR_SHARE` of the pixels sit at the image minimum (zero-mean
+    noise clipped at 0 by an 8-bit ADC: the histogram's mode is the floor), the background is
+    taken as a normal distribution clipped there and its mean and sigma come from the floor
+    share and a quantile above it (:func:`_clipped_background`); the threshold is then
+    ``mean + k sigma`` of that normal (``2 sigma`` for zero-mean noise at k = 2).
+
     Before MART keep ``k`` small: a threshold also cuts the wings of particle images, and
     MART's zero-pixel rule then removes voxels that hold particles (with 5 % background
     and 1 % noise, k = 0 keeps Q within 0.03 of the unprocessed images and prunes 97 % of
@@ -142,14 +148,54 @@ def preprocess_images(images, *, k: float = 2.0) -> list[np.ndarray]:
         if hi <= lo:
             out.append(np.maximum(a - lo, 0.0) if lo > 0 else a.copy())
             continue
-        counts, edges = np.histogram(a, bins=1024, range=(lo, hi))
-        peak = counts.argmax()
-        in_peak = a[(a >= edges[peak]) & (a <= edges[peak + 1])]
-        mode = float(in_peak.mean())  # the background level: mean of the histogram's peak bin
-        below = a[a <= mode]
-        sigma = float(np.sqrt(np.mean((below - mode) ** 2))) if below.size else 0.0
+        p0 = float(np.mean(a <= lo))  # share of pixels at the floor (clipped negative noise)
+        clipped = _clipped_background(a, lo, p0) if p0 >= CLIPPED_FLOOR_SHARE else None
+        if clipped is not None:
+            mode, sigma = clipped
+        else:
+            counts, edges = np.histogram(a, bins=1024, range=(lo, hi))
+            peak = counts.argmax()
+            in_peak = a[(a >= edges[peak]) & (a <= edges[peak + 1])]
+            mode = float(in_peak.mean())  # the background level: mean of the histogram's peak bin
+            below = a[a <= mode]
+            sigma = float(np.sqrt(np.mean((below - mode) ** 2))) if below.size else 0.0
         out.append(np.maximum(a - (mode + k * sigma), 0.0))
     return out
+
+
+#: Share of pixels at the image minimum above which :func:`preprocess_images` treats the
+#: background as a normal distribution clipped at the floor (an ADC clips negative noise at 0).
+CLIPPED_FLOOR_SHARE = 0.05
+#: Largest misfit [sigma] of the clipped normal at a second quantile before the image is
+#: treated as not clipped noise (a noise-free particle image).
+CLIPPED_NORMAL_TOL = 0.5
+
+
+def _clipped_background(a, floor, p0):
+    """(mean, sigma) of a normal background clipped at ``floor`` (None when the pixels above
+    the floor do not follow one), from the share ``p0`` of
+    pixels at the floor and the quantile ``q1 = p0 + (1 - p0) / 4`` above it:
+    ``floor = mu + sigma z(p0)`` and ``v(q1) = mu + sigma z(q1)`` (z the standard normal
+    quantile). The histogram mode of such an image is the floor itself and nothing lies
+    below it, so the mode / lower-half estimate finds no noise there. Particle light only
+    enters above ``q1`` unless particles cover more than a quarter of the pixels above the floor."""
+    from scipy.special import ndtri
+
+    if np.all(a == np.round(a)):  # integer counts: the floor holds everything below floor + 0.5
+        floor = floor + 0.5
+    q1 = p0 + 0.25 * (1.0 - p0)
+    v1 = float(np.quantile(a, q1))
+    dz = float(ndtri(q1) - ndtri(min(p0, 1.0 - 1e-12)))
+    if v1 <= floor or dz <= 0:
+        return None
+    sigma = (v1 - floor) / dz
+    mu = floor - sigma * float(ndtri(min(p0, 1.0 - 1e-12)))
+    # a clipped normal also predicts the quantile three quarters up; particle light alone (a
+    # noise-free image: most pixels exactly 0, long-tailed wings) does not follow it
+    q2 = p0 + 0.75 * (1.0 - p0)
+    if abs(float(np.quantile(a, q2)) - (mu + sigma * float(ndtri(q2)))) > CLIPPED_NORMAL_TOL * sigma:
+        return None
+    return mu, float(sigma)
 
 
 # ---------------------------------------------------------------------- sampling
