@@ -106,7 +106,7 @@ def paper_view_weights(white: LightField) -> np.ndarray:
 
 
 def paper_refocus(lf: LightField, grid: VoxelGrid, *, equation: int, weights=None, gamma_l: float | None = None,
-                  min_view_fraction: float = 0.5, progress: Progress = None) -> np.ndarray:
+                  floor: float = 0.0, min_view_fraction: float = 0.5, progress: Progress = None) -> np.ndarray:
     """Fahringer & Thurow's volumetric refocusing of one plenoptic camera onto ``grid``.
 
     A voxel at camera-local ``(x, y, z)`` (``z`` its distance in front of the main lens)
@@ -138,8 +138,17 @@ def paper_refocus(lf: LightField, grid: VoxelGrid, *, equation: int, weights=Non
         Eq. 14's ``w(u, v)`` (:func:`paper_view_weights`; default ``lf.view_weights``).
         Eq. 13 uses every view with weight 1 (the paper's aperture function ``A = 1``).
     gamma_l : float > 0, optional
-        Eq. 14's rescaling exponent; default the paper's typical value, the reciprocal of
-        the number of pixels under each lenslet (``1 / pmr^2``).
+        Eq. 14's rescaling exponent, which the paper chooses so that the reconstruction's
+        intensity histogram approximately equals that of the sub-aperture images; default
+        ``1 / sum w`` (the weighted geometric mean, in the images' intensity units). The
+        paper's "typically about the reciprocal of the number of pixels under each lenslet"
+        (``1 / pmr^2``) is this value when every view has weight 1.
+    floor : float >= 0
+        Eq. 14 only: light-field samples below ``floor`` are raised to it (e.g. one count of
+        the integer images), so that a dark sample in a low-weight view scales a voxel down
+        by ``floor^w`` instead of zeroing it, the behaviour the paper describes ("the low
+        intensity sub-aperture images being nearly uniformly equal to ones"); 0: strict
+        (``0^w = 0``: any dark view with ``w > 0`` zeroes the voxel).
     min_view_fraction : float
         Voxels reached by less than this fraction of the views (eq. 13) or of the view
         weight (eq. 14) are zero (the volume's borders, outside the light field).
@@ -157,9 +166,15 @@ def paper_refocus(lf: LightField, grid: VoxelGrid, *, equation: int, weights=Non
         return (vol * np.float32(n_views)).astype(np.float32)  # the mean over views -> the sum
     w = lf.view_weights if weights is None else np.asarray(weights, dtype=np.float64)
     if gamma_l is None:
-        gamma_l = 1.0 / lf.optics.pmr**2 if lf.optics is not None else 1.0 / n_views
+        gamma_l = 1.0 / float(np.sum(w))
     if not (np.isfinite(gamma_l) and gamma_l > 0):
         raise ConfigError(f"paper_refocus: 'gamma_l' must be finite and > 0, got {gamma_l!r}.")
+    if not (np.isfinite(floor) and floor >= 0):
+        raise ConfigError(f"paper_refocus: 'floor' must be finite and >= 0, got {floor!r}.")
+    if floor > 0:
+        from dataclasses import replace
+
+        lf = replace(lf, data=np.maximum(lf.data, np.float32(floor)))
     # refocus_volume's multiplicative form is (prod L^w)^(1 / sum w): raised to gamma_L sum w
     return plenoptic_volume(lf, grid, method="multiplicative", weights=w, exponent=float(gamma_l * np.sum(w)),
                             min_view_fraction=min_view_fraction, progress=progress)

@@ -62,8 +62,12 @@ def test_eq14_multiplicative_against_the_equation():
     ours = paper_refocus(lf, grid, equation=14, weights=w, gamma_l=gamma_l)
     ref = eq14_afresh(lf, cam, grid, w, gamma_l)
     np.testing.assert_allclose(ours, ref, rtol=REL_TOL)
-    # the default gamma_L is the reciprocal of the pixels under each lenslet (10 x 10)
-    np.testing.assert_allclose(paper_refocus(lf, grid, equation=14, weights=w), ref, rtol=REL_TOL)
+    # the default gamma_L = 1 / sum w: the weighted geometric mean (histogram of the views)
+    np.testing.assert_allclose(paper_refocus(lf, grid, equation=14, weights=w),
+                               eq14_afresh(lf, cam, grid, w, 1.0 / w.sum()), rtol=REL_TOL)
+    # a floor raises dark samples: with every sample above it, nothing changes
+    np.testing.assert_allclose(paper_refocus(lf, grid, equation=14, weights=w, gamma_l=gamma_l, floor=0.1), ref,
+                               rtol=REL_TOL)
 
 
 def test_eq13_additive_against_the_equation():
