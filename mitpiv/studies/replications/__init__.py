@@ -5,4 +5,5 @@ name (``mitpiv replicate NAME``) to the module, imported on first use."""
 #: study name -> module defining STUDY
 MODULES: dict[str, str] = {
     "sapiv-distortion": "mitpiv.studies.replications.sapiv_distortion",
+    "multi-plenoptic": "mitpiv.studies.replications.multi_plenoptic",
 }
