@@ -46,7 +46,14 @@ def _scale(quick: bool) -> dict:
 
 
 #: the full run's crop: the central FULL_LENSLETS x FULL_LENSLETS lenslets (see the report's cost section)
-FULL_LENSLETS = 96
+FULL_LENSLETS = 196
+#: one full-scale point measured on the project's shared 2-core machine (2026-11-23, process CPU
+#: seconds per frame, /tmp cost scripts of the session that wrote this module): a 3280 x 3280
+#: plenoptic image of 2,474 particles (ppp 0.023, 4000 rays each) and its eq. 14 volume on
+#: 328 x 328 x 82 voxels; a 2-camera configuration (eq. 15 + metrics + 2-pass PIV) and a MART
+#: configuration measured at 96 x 96 lenslets, scaled by the voxel count.
+FULL_POINT_CPU_S = {"render": 7.3, "decode": 1.7, "eq14": 44.4, "plen_config_96": 5.5, "mart_config_96": 6.0,
+                    "plen_camera_96": 9.0, "std_camera_96": 0.7}
 
 
 def _f(v) -> str:
@@ -372,6 +379,10 @@ def _cost_section(quick, n, n_cam, cam_cpu, n_cfg, cfg_cpu, C, cam_items) -> str
     frac = (n / 328) ** 2
     plen = [C[it["key"]]["cpu_s"] for it in cam_items if it["kind"] == "plen"]
     per_plen = float(np.mean(plen)) if plen else math.nan
+    m = FULL_POINT_CPU_S
+    per_cam = 2 * (m["render"] + m["decode"] + m["eq14"])
+    full = _full_estimate_cpu_s(328)
+    crop = _full_estimate_cpu_s(FULL_LENSLETS)
     return (
         "## Crop and cost\n\n"
         f"Scale `{'quick' if quick else 'full'}`: the central {n} x {n} lenslets ({10 * n} x {10 * n} pixels, "
@@ -380,11 +391,32 @@ def _cost_section(quick, n, n_cam, cam_cpu, n_cfg, cfg_cpu, C, cam_items) -> str
         "reconstructed pixel). "
         f"This run: {n_cam} camera renders + reconstructions ({cam_cpu:.0f} CPU s, {per_plen:.1f} s per plenoptic "
         f"camera of two frames) and {n_cfg} configurations ({cfg_cpu:.0f} CPU s), i.e. about "
-        f"{(cam_cpu + cfg_cpu) / 2 / 60:.0f} min on 2 cores with `--workers 2`. "
-        "Measured cost of one full-scale plenoptic camera point (3280 x 3280 sensor, 328 x 328 x 82 voxels, 2,500 "
-        "particles, two frames, eq. 14): see docs/replications/multi-plenoptic (FULL_COST_NOTE); the full run's crop "
-        f"({FULL_LENSLETS} x {FULL_LENSLETS} lenslets) was chosen from it to fit a few hours on 2 cores."
+        f"{(cam_cpu + cfg_cpu) / 2 / 60:.0f} min on 2 idle cores with `--workers 2`.\n\n"
+        "Cost of one full-scale point, measured (process CPU time on the project's shared 2-core machine): a "
+        f"3280 x 3280 plenoptic image of 2,474 particles {m['render']:.1f} s per frame, its decoding {m['decode']:.1f} s, "
+        f"its eq. 14 volume on 328 x 328 x 82 voxels {m['eq14']:.1f} s: {per_cam:.0f} s per plenoptic camera "
+        "(two frames); a configuration (eq. 15 or MART, Q*, particles, two-pass PIV) about "
+        f"{m['plen_config_96'] * (328 / 96) ** 2:.0f} s (measured at 96 x 96 lenslets and scaled by the voxel count). "
+        f"The study's {n_cam} cameras and {n_cfg} configurations at the full sensor would take about "
+        f"{full / 3600:.1f} CPU hours ({full / 7200:.1f} h with `--workers 2`), more than REPLICATION.md's two hours, "
+        f"so the full run crops to the central {FULL_LENSLETS} x {FULL_LENSLETS} lenslets "
+        f"({(FULL_LENSLETS / 328) ** 2:.0%} of the sensor): about {crop / 3600:.1f} CPU hours, "
+        f"{crop / 7200:.1f} h with `--workers 2` on 2 idle cores (the shared machine is slower)."
     )
+
+
+def _full_estimate_cpu_s(n: int) -> float:
+    """Estimated CPU seconds of the full study at ``n`` x ``n`` lenslets, from the measured
+    96-lenslet point costs scaled by the voxel count (Fig. 7's thicker volumes by their depth)."""
+    sc = _scale(False)
+    sc["n"] = n
+    cams, cfgs = _plan(sc, 0, Path("."))
+    m = FULL_POINT_CPU_S
+    k = (n / 96) ** 2
+    depth = lambda it: it["ratio"] / BASE_RATIO  # noqa: E731  voxels along z relative to 1:4
+    t = sum((m["plen_camera_96"] * depth(it) if it["kind"] == "plen" else m["std_camera_96"]) for it in cams)
+    t += sum((m["plen_config_96"] if it["method"].startswith("eq") else m["mart_config_96"]) * depth(it) for it in cfgs)
+    return t * k
 
 
 def _disagreements(rows) -> str:
