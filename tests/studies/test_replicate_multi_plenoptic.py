@@ -120,3 +120,29 @@ def test_standard_camera_calibrated_from_rendered_targets():
     err = np.linalg.norm(mapping.project(pts) - cam.project(pts), axis=1)
     assert rep["markers"] >= 20 and rep["rms_px"] < 0.2
     assert np.sqrt(np.mean(err**2)) < 0.1  # dot location ~0.04 px (measured), averaged by the fit
+
+
+def test_scene_is_the_papers_system():
+    """scenes/multiplenoptic_paper (the Mitsuba version of the study) carries Table 1 and
+    S_o / p_M = 8 exactly, and its cropped experiment validates."""
+    import xml.etree.ElementTree as ET
+    from pathlib import Path
+
+    from mitpiv.physics.plenoptic import PRESETS
+    from mitpiv.render.scene import scene_defaults
+    from mitpiv.studies.runner import load_experiment
+
+    root = Path(__file__).resolve().parents[2] / "scenes" / "multiplenoptic_paper"
+    d = scene_defaults(root / "scene.xml")
+    assert (int(d["lenslets"]), int(d["resolution"]), float(d["focus_distance_mm"])) == (328, 3280, 40.0)
+    assert float(d["thickness_mm"]) == pytest.approx(S.volume_box(8.0, 0.25, 328)[2] / 4, abs=1e-3)
+    sensors = {s.get("id"): s for s in ET.parse(root / "scene.xml").getroot().iter("sensor")}
+    assert {"plen0", "plen1", "plen2", "plen3", "pin0", "pin1"} <= set(sensors)
+    vals = {f.get("name"): f.get("value") for f in sensors["plen0"].iter("float")}
+    p = PRESETS["multiplenoptic_paper"]
+    assert float(vals["focal_length_mm"]) == p["focal_length_mm"] and float(vals["aperture_diameter_mm"]) == 5.0
+    assert float(vals["pixel_pitch_um"]) == p["pixel_pitch_um"] and float(vals["mla_pitch_um"]) == p["mla_pitch_um"]
+    assert float(vals["mla_focal_length_um"]) == p["mla_focal_length_um"]
+    cfg = load_experiment(root / "experiment.toml")
+    assert cfg.reconstruction.voxel_mm == pytest.approx(S.voxel_mm(8.0), abs=1e-4)
+    assert cfg.sensor.bit_depth == 16
