@@ -575,9 +575,21 @@ def _check_scheduler(address: str, timeout_s: float = 3.0) -> None:
 
 
 def cmd_export(args) -> int:
-    if not args.vtk:
-        print("mitpiv: error: export: choose a format: --vtk (ParaView / VTK files).", file=sys.stderr)
+    if not (args.vtk or args.openlpt or args.openptv):
+        print("mitpiv: error: export: choose a format: --vtk (ParaView / VTK files), --openlpt DIR or --openptv DIR "
+              "(tracker inputs).", file=sys.stderr)
         return 2
+    if args.openlpt or args.openptv:
+        from mitpiv.studies.export import export_tracker_inputs
+
+        for tool, out in (("openlpt", args.openlpt), ("openptv", args.openptv)):
+            if out:
+                opts = {"undistort": True} if tool == "openlpt" and args.undistort else {}
+                m = export_tracker_inputs(args.run, out, tool=tool, progress=_progress(args), **opts)
+                print(f"{tool}: {m['n_cameras']} cameras x {m['n_frames']} frames ({m['source']} images, "
+                      f"{m['bits']}-bit, gain {m['gain']:.6g}) -> {out}")
+        if not args.vtk:
+            return 0
     from mitpiv.studies.export import export_vtk
 
     files = export_vtk(args.run, args.out, progress=_progress(args))
@@ -773,11 +785,16 @@ def main(argv=None) -> int:
     w.add_argument("--workers", type=_int_in(1, 512), default=None, help="local cluster worker processes (default 2)")
     w.add_argument("--full", action="store_true", help="the full-size study (the study's [full] overrides)")
     w.set_defaults(func=cmd_sweep)
-    ex = sub.add_parser("export", help="export a finished run folder for other tools (--vtk: ParaView files)")
+    ex = sub.add_parser("export", help="export a finished run folder for other tools (--vtk: ParaView files; "
+                        "--openlpt / --openptv: inputs of those trackers)")
     ex.add_argument("run", help="run folder of 'mitpiv run'")
     ex.add_argument("--vtk", action="store_true", help="volumes (.vti), PIV field (.vts), particles and tracks (.vtu), "
                     "run.pvd")
     ex.add_argument("--out", default=None, help="output folder (default RUN/vtk)")
+    ex.add_argument("--openlpt", default=None, metavar="DIR", help="OpenLPT STB inputs (config, camera files, TIFFs)")
+    ex.add_argument("--openptv", default=None, metavar="DIR", help="OpenPTV inputs (parameters, .ori/.addpar, TIFFs)")
+    ex.add_argument("--undistort", action="store_true", help="--openlpt: resample distorted cameras' frames to "
+                    "undistorted pinhole images (openlpt 2.2.4 cannot stereo-match distorted cameras)")
     ex.set_defaults(func=cmd_export)
     b = sub.add_parser("bench", help="benchmarks: 'accuracy-time' measures every accuracy knob's time and error")
     b.add_argument("which", choices=["accuracy-time"], help="the benchmark to run")

@@ -597,6 +597,26 @@ class PointPSFTable:
         fine.setflags(write=False)
         return cls(fine=fine, oversample=s, window=int(window))
 
+    @classmethod
+    def from_kernel(cls, kernel, *, oversample: int = 15) -> PointPSFTable:
+        """Table of a discrete pixel kernel (e.g. a PSF table printed in a paper): the point's
+        light falls in the pixel holding it and is spread over its neighbours by ``kernel``
+        (odd square, window = its side), whatever the sub-pixel position.
+
+        kernel : (w, w) non-negative array with a positive sum (renormalised to 1 per point).
+        """
+        k = np.asarray(kernel, dtype=float)
+        if k.ndim != 2 or k.shape[0] != k.shape[1] or k.shape[0] % 2 == 0:
+            raise ConfigError(f"PointPSFTable.from_kernel: 'kernel' must be an odd square 2D array, got shape {k.shape}.")
+        if not np.all(np.isfinite(k)) or np.any(k < 0) or k.sum() <= 0:
+            raise ConfigError("PointPSFTable.from_kernel: 'kernel' must be finite, non-negative and sum to > 0.")
+        if isinstance(oversample, bool) or int(oversample) != oversample or oversample < 1 or oversample % 2 == 0:
+            raise ConfigError(f"PointPSFTable.from_kernel: 'oversample' must be an odd positive integer, got {oversample!r}.")
+        s = int(oversample)
+        fine = np.kron(k / k.sum(), np.ones((s, s)))  # block d of the footprint: every offset in that pixel
+        fine.setflags(write=False)
+        return cls(fine=fine, oversample=s, window=int(k.shape[0]))
+
     def footprints(self, uv_px) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(i0 (n,), j0 (n,), values (n, window, window)): each point's footprint, whose pixel
         ``[a, b]`` is image pixel ``(row j0 + a, column i0 + b)``; each footprint sums to 1."""

@@ -1,5 +1,7 @@
 """Export a finished run folder to files other tools open: ParaView / VTK
-(:func:`export_vtk`, the writers of :mod:`mitpiv.io.vtk`).
+(:func:`export_vtk`, the writers of :mod:`mitpiv.io.vtk`), and the inputs of other particle
+trackers on the run's own images (:func:`export_tracker_inputs`: OpenLPT,
+:mod:`mitpiv.io.openlpt`; OpenPTV, :mod:`mitpiv.io.openptv`).
 
 A tomo run (:mod:`mitpiv.studies.kinds.tomo`) becomes, in ``out_dir`` (default
 ``RUN/vtk``):
@@ -37,7 +39,8 @@ import numpy as np
 from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.progress import Progress, bar
 
-__all__ = ["export_vtk", "found_positions", "particle_errors", "TRACK_SAMPLES"]
+__all__ = ["export_vtk", "export_tracker_inputs", "run_images", "found_positions", "particle_errors", "TRACK_SAMPLES",
+           "TRACKERS"]
 
 log = logging.getLogger(__name__)
 
@@ -211,3 +214,110 @@ def _flow_at(flow, pts, t_s) -> np.ndarray:
         v[sel] = flow(pts[sel], float(t))
     return v
 
+
+
+#: The trackers :func:`export_tracker_inputs` writes for.
+TRACKERS = ("openlpt", "openptv")
+
+
+def run_images(run_dir) -> dict:
+    """The images of a run for export: the sensor stage's counts when the run has one, else
+    the render stage's radiance.
+
+    Returns
+    -------
+    dict: ``source`` (``"sensor"`` / ``"render"``), ``sensors`` (ids, sorted), ``frames``
+    (frame numbers, sorted), ``files`` (per sensor, the EXR paths of its frames), ``cameras``
+    (per sensor, the camera from the first frame's metadata).
+
+    Raises
+    ------
+    FileFormatError
+        No rendered images (the render stage has not finished), sensors with differing
+        frames, or images without a camera in their metadata.
+    """
+    from mitpiv.io import camera_from_metadata, read_exr
+
+    run = Path(run_dir)
+    _experiment(run)
+    source = next((s for s in ("sensor", "render") if (run / s / "stage.json").is_file()), None)
+    files = sorted((run / source).glob("*_frame*.exr")) if source else []
+    if not files:
+        raise FileFormatError(f"export: the run {str(run)!r} has no rendered images (no finished render stage); "
+                              f"run 'mitpiv run EXPERIMENT --out {run}' first.")
+    by_sensor: dict[str, dict[int, Path]] = {}
+    for f in files:
+        sid, _, num = f.stem.rpartition("_frame")
+        if not num.isdigit():
+            continue
+        by_sensor.setdefault(sid, {})[int(num)] = f
+    sensors = sorted(by_sensor)
+    frames = sorted(by_sensor[sensors[0]])
+    for s in sensors:
+        if sorted(by_sensor[s]) != frames:
+            raise FileFormatError(f"export: sensor {s!r} of {str(run / source)!r} has frames {sorted(by_sensor[s])}, "
+                                  f"sensor {sensors[0]!r} has {frames}; re-run the render stage.")
+    cameras = [camera_from_metadata(read_exr(by_sensor[s][frames[0]])[1]) for s in sensors]
+    return {"source": source, "sensors": sensors, "frames": frames,
+            "files": [[by_sensor[s][k] for k in frames] for s in sensors], "cameras": cameras}
+
+
+def export_tracker_inputs(run_dir, out_dir, *, tool: str, progress: Progress = None, **options) -> dict:
+    """Write the inputs of another tracker for a run's images and cameras.
+
+    Parameters
+    ----------
+    run_dir : str or Path
+        A run folder whose render stage finished (its sensor stage's counts are used when
+        it has one).
+    out_dir : str or Path
+        The folder to write.
+    tool : ``"openlpt"`` or ``"openptv"``
+        :func:`mitpiv.io.openlpt.export_openlpt` or :func:`mitpiv.io.openptv.export_openptv`.
+    progress : optional
+        Progress bar control (:mod:`mitpiv.progress`).
+    **options
+        Passed to the exporter (``bits``, ``gain``, ``settings``, ...). The volume is the
+        experiment's seeding box; OpenLPT's frame rate is 1 / the truth's frame interval.
+
+    Returns
+    -------
+    dict
+        The exporter's manifest, with ``run``, ``source`` and ``sensors`` added.
+
+    Raises
+    ------
+    ConfigError
+        An unknown tool, or cameras / options the tool cannot take (nothing is written).
+    FileFormatError
+        Not a run folder, or one without rendered images.
+    """
+    if tool not in TRACKERS:
+        raise ConfigError(f"export: 'tool' must be one of {TRACKERS}, got {tool!r}.")
+    run = Path(run_dir)
+    exp = _experiment(run)
+    imgs = run_images(run)
+    seeding = exp.get("seeding") or {}
+    if "box_min_mm" not in seeding or "box_max_mm" not in seeding:
+        raise FileFormatError(f"export: {str(run / 'experiment.json')!r} has no [seeding] box_min_mm / box_max_mm "
+                              "(the volume the tracker observes).")
+    box = {"lower_mm": seeding["box_min_mm"], "upper_mm": seeding["box_max_mm"]}
+    if tool == "openlpt":
+        from mitpiv.io.openlpt import export_openlpt
+
+        if "frame_rate_hz" not in options and (run / "particles" / "truth.npz").is_file():
+            from mitpiv.io import read_truth
+
+            t = np.asarray(read_truth(run / "particles" / "truth.npz")["times_s"], dtype=np.float64)
+            if t.size > 1 and t[1] > t[0]:
+                options["frame_rate_hz"] = 1.0 / float(t[1] - t[0])
+        manifest = export_openlpt(out_dir, imgs["files"], imgs["cameras"], **box, progress=progress, **options)
+    else:
+        from mitpiv.io.openptv import export_openptv
+
+        manifest = export_openptv(out_dir, imgs["files"], imgs["cameras"], **box, progress=progress, **options)
+    manifest.update(run=str(run), source=imgs["source"], sensors=imgs["sensors"])
+    from mitpiv.io import write_json
+
+    write_json(Path(out_dir) / "mitpiv_export.json", manifest)
+    return manifest

@@ -137,7 +137,13 @@ def test_phase_eval_matches_theory_including_0_and_180(d_um, m):
 
 def test_mie_phase_in_a_medium_volpath(tmp_path):
     """Single scattering in a thin cloud lit by the laser sheet: with the same random numbers,
-    mie / isotropic = 4 pi p(theta) (everything else cancels)."""
+    mie / isotropic = 4 pi p(theta) (everything else cancels).
+
+    A particle scene with a nested, size-less mie phase stays alive (and rendered) meanwhile:
+    Dr.Jit traces every live phase function when a medium's phase is dispatched, and the
+    nested one once raised 'no particle size' there."""
+    live = particle_scene(tmp_path, cam_towards(polar(45.0, 90.0)))
+    assert render(live).sum() > 0
 
     def cloud(phase, theta_deg):
         cam = cam_towards(polar(theta_deg, 90.0))
@@ -157,6 +163,7 @@ def test_mie_phase_in_a_medium_volpath(tmp_path):
         # the cloud spans +-0.23 deg; the table interpolates at 1024 nodes
         assert ratio == pytest.approx(4 * math.pi * mie.phase_function(1.0, 1.45, [theta], wavelength_nm=532)[0],
                                      rel=POWER_REL_TOL)
+    assert live.emitters()  # still alive during the medium renders above
 
 
 # ----------------------------------------------------------------------------- particles in images

@@ -251,10 +251,6 @@ def test_particle_csv_drives_an_experiment(tmp_path, caplog):
     from mitpiv.io import read_truth
     from mitpiv.studies import load_experiment, run_config
 
-    # (kept under tests/studies, after tests/render: a live tomo4 scene's nested mie phase,
-    # which has no particle size of its own, breaks a later standalone mie medium render in
-    # the same process; see tests/render/test_mie_render.py::test_mie_phase_in_a_medium_volpath)
-
     scene = Path(__file__).resolve().parents[2] / "scenes" / "tomo4" / "scene.xml"
     pts = np.random.default_rng(2).uniform([-2, -2, -1], [2, 2, 1], (30, 3))
     np.savetxt(tmp_path / "mine.csv", np.column_stack([pts, np.full(30, 1.5)]), delimiter=",",

@@ -36,7 +36,7 @@ def test_quick_run_schema_and_ids(tmp_path):
     rows = {r["id"]: r for r in res["rows"]}
     assert 0.0 < rows["Q_D0"]["ours"] <= 1.0
     assert rows["Q_D2"]["ours"] < rows["Q_D0"]["ours"]  # 2 % distortion costs Q (the study's headline)
-    assert {"Q_density_trend", "Q_density_trend_fixed_threshold"} <= set(rows)
+    assert {"Q_density_trend", "Q_density_trend_fixed_threshold", "Q_SA0.1_paperpsf"} <= set(rows)
     assert set(res["curves"]["Q_vs_density_threshold_k"]["y"]) == {"k0", "k1", "k2", "k3", "k5", "k8"}
     assert (tmp_path / "report.md").is_file() and (tmp_path / "diag_Q_threshold_k.png").is_file()
 
@@ -193,3 +193,33 @@ def test_threshold_diagnosis_keeps_the_papers_metrics_and_scores_other_threshold
     assert b["Q_by_k"]["0"] != pytest.approx(b["Q_by_k"]["3"], abs=1e-3)
     assert set(b["Q_by_abs"]) == {"0.02", "0.05", "0.1", "0.2"}
     assert all(-1.0 <= v <= 1.0 for v in (*b["Q_by_k"].values(), *b["Q_by_abs"].values()))
+
+
+def test_the_papers_psf_kernel_follows_tables_3_2_and_3_3():
+    from mitpiv.imaging import PointPSFTable, splat_points
+    from mitpiv.studies.replications.sapiv_distortion import PAPER_TABLE_3_2, PAPER_TABLE_3_3, paper_kernel
+
+    ring = np.maximum.outer(np.abs(np.arange(5) - 2), np.abs(np.arange(5) - 2))
+    t32 = np.array(PAPER_TABLE_3_2)
+    # the paper's two tables differ by their rounding: Table 3.2's rings sum to 0.071 / 0.025,
+    # Table 3.3 says 0.070 / 0.022 for the same PSF
+    assert [t32[ring == r].sum() for r in (1, 2)] == pytest.approx([0.071, 0.025], abs=1e-12)
+    for sa, energies in PAPER_TABLE_3_3.items():
+        k = paper_kernel(sa)
+        assert [k[ring == r].sum() for r in (0, 1, 2)] == pytest.approx(energies, abs=1e-12)
+        for r in (1, 2):  # within a ring, Table 3.2's shape
+            np.testing.assert_allclose(k[ring == r] / energies[r], t32[ring == r] / t32[ring == r].sum(), atol=1e-12)
+        # one point anywhere inside a pixel: that pixel and its neighbours get the kernel (sum 1)
+        t = PointPSFTable.from_kernel(k, oversample=15)
+        for uv in ((30.02, 40.97), (30.5, 40.5), (30.97, 40.03)):
+            img = splat_points(np.array([uv]), (64, 64), t, dtype=np.float64)
+            np.testing.assert_allclose(img[38:43, 28:33], k / k.sum(), atol=1e-12)
+
+
+@pytest.mark.parametrize("bad", [np.ones((4, 4)), np.ones(5), -np.ones((3, 3)), np.full((3, 3), np.nan)])
+def test_kernel_table_refuses_bad_kernels(bad):
+    from mitpiv.errors import ConfigError
+    from mitpiv.imaging import PointPSFTable
+
+    with pytest.raises(ConfigError, match="kernel"):
+        PointPSFTable.from_kernel(bad)

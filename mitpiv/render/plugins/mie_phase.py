@@ -158,6 +158,8 @@ class MiePhase(mi.PhaseFunction):
         else:
             self.size = None if d is None else check_positive("diameter_um", d, owner="mie", unit="um")
         self._distr = None
+        #: set by tracer_particles, which reads this plugin's cross-section table instead
+        self.nested_in_tracer = False
         if self.size is not None:
             self._build(self.wavelength_nm or 532.0)
         self.m_flags = mi.PhaseFunctionFlags.Anisotropic
@@ -218,13 +220,24 @@ class MiePhase(mi.PhaseFunction):
         self._distr = mi.IrregularContinuousDistribution(self._theta, self._g)
         self._table = t
 
-    def _require(self):
-        if self._distr is None:
-            raise ConfigError("mie: no particle size: give 'diameter_um' (or a distribution) to use it outside tracer_particles.")
+    def _require(self) -> bool:
+        """True when this phase has a table to sample and evaluate.
+
+        Without a particle size it has none: an error for a medium's phase, but not for one
+        nested in ``tracer_particles`` (which reads :meth:`cross_section_table`). Dr.Jit traces
+        the methods of every live phase function whenever any medium's phase is dispatched,
+        so a nested instance from another scene still alive in the process must trace
+        cleanly: it returns zeros (it is never reached at run time)."""
+        if self._distr is not None:
+            return True
+        if self.nested_in_tracer:
+            return False
+        raise ConfigError("mie: no particle size: give 'diameter_um' (or a distribution) to use it outside tracer_particles.")
 
     def pdf_theta(self, theta):
         """Phase function [1/sr] at scattering angles ``theta`` [rad] (the table's interpolant)."""
-        self._require()
+        if not self._require():
+            return dr.zeros(mi.Float, dr.width(theta))
         i, t, width = interval(self._theta, self._n, theta)
         g0 = dr.gather(mi.Float, self._g, i)
         g1 = dr.gather(mi.Float, self._g, i + 1)
@@ -241,7 +254,8 @@ class MiePhase(mi.PhaseFunction):
 
     # ------------------------------------------------------------------ PhaseFunction interface
     def sample(self, ctx, mei, sample1, sample2, active=True):
-        self._require()
+        if not self._require():
+            return dr.zeros(mi.Vector3f, dr.width(sample1)), mi.Spectrum(0.0), dr.zeros(mi.Float, dr.width(sample1))
         theta = self._distr.sample(sample2.x, active)
         sin_t, cos_t = dr.sincos(theta)
         sin_p, cos_p = dr.sincos(2.0 * dr.pi * sample2.y)

@@ -123,6 +123,8 @@ class TracerParticles(mi.Emitter):
         if self.phase is None:
             self.phase = mi.load_dict({"type": "isotropic"})
         self.is_mie = bool(getattr(self.phase, "is_mie", False))
+        if self.is_mie:
+            self.phase.nested_in_tracer = True
         if self.is_mie and q_sca is not None:
             raise ConfigError("tracer_particles: 'scattering_efficiency' cannot be combined with the mie phase, "
                               "which computes the scattering cross-section; remove it.")
