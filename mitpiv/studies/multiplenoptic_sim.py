@@ -289,11 +289,14 @@ def calibrate_standard(so_over_pm: float, thickness_ratio: float, angle_deg: flo
     """A standard camera's mapping calibrated from rendered dot targets, as the paper does for
     its MART reconstructions ("a series of calibration images are generated").
 
-    Targets: planes of Gaussian dots (sigma 1 voxel, pitch 8 voxels) at five depths through
+    Targets: planes of Gaussian dots (sigma 1 voxel, pitch 8 voxels / cos(angle)) at five depths through
     the volume's thickness, rendered by :func:`render_standard` (the same light rays, defocus
     and diffraction as the particle images); dots located by
     :func:`mitpiv.reconstruct.calibration.detect_dots`, labelled by the design pose and
-    fitted by a pinhole model without distortion terms (an ideal thin lens has none).
+    fitted by a pinhole model without distortion terms (an ideal thin lens has none), or by
+    Soloff's polynomial where OpenCV's pinhole fit fails; where both fail (at 60 deg and f/2
+    the oblique target planes are out of focus but for two depths) the true camera model,
+    named in the report's ``model``.
 
     Returns
     -------
@@ -305,8 +308,10 @@ def calibrate_standard(so_over_pm: float, thickness_ratio: float, angle_deg: flo
     cam = standard_camera(so_over_pm, angle_deg, azimuth_deg, n_lenslets, f_number)
     vox = voxel_mm(so_over_pm)
     lo, hi, _ = volume_box(so_over_pm, thickness_ratio, n_lenslets)
-    pitch = 8 * vox
-    half = 0.5 * (hi[0] - lo[0]) * 1.6  # beyond the crop: an oblique camera sees past its edge
+    # an oblique camera sees the planes foreshortened by cos(angle) and a wider strip of them
+    stretch = 1.0 / math.cos(math.radians(angle_deg))
+    pitch = 8 * vox * stretch
+    half = 0.5 * (hi[0] - lo[0]) * 1.6 * stretch  # beyond the crop: an oblique camera sees past its edge
     g = np.arange(-math.floor(half / pitch), math.floor(half / pitch) + 1) * pitch
     px, world, true_px = [], [], []
     w, h = cam.resolution
@@ -330,8 +335,20 @@ def calibrate_standard(so_over_pm: float, thickness_ratio: float, angle_deg: flo
     if not px:
         raise ConfigError(f"calibrate_standard: no target dot found (camera at {angle_deg} deg, f/{f_number}).")
     px, world, true_px = np.concatenate(px), np.concatenate(world), np.concatenate(true_px)
-    mapping = calibrate(px, world, model="pinhole", resolution=cam.resolution, distortion="none",
-                        pixel_pitch_um=cam.pixel_pitch_um, max_rms_px=1.0)
+    try:
+        mapping = calibrate(px, world, model="pinhole", resolution=cam.resolution, distortion="none",
+                            pixel_pitch_um=cam.pixel_pitch_um, max_rms_px=1.0)
+    except CalibrationError as e:  # e.g. OpenCV's pinhole fit at 60 deg, f/2 (few, blurred dots): Soloff's polynomial
+        log.info("calibrate_standard: pinhole fit failed (%s); fitting the polynomial model", e)
+        try:
+            mapping = calibrate(px, world, model="polynomial", resolution=cam.resolution, max_rms_px=1.0)
+        except CalibrationError as e2:  # the targets' dots too blurred at too few depths: the true model
+            from mitpiv.reconstruct.mapping import PinholeMapping
+
+            log.warning("calibrate_standard: no calibration at %g deg, f/%g (%s); using the true camera model",
+                        angle_deg, f_number, e2)
+            mapping = PinholeMapping(cam)
+            mapping.fit_report = {"model": "true (no calibration: " + str(e2)[:80] + ")", "rms_px": 0.0}
     err = np.linalg.norm(px - true_px, axis=1)
     return mapping, {"markers": int(len(px)), "rms_px": float(mapping.fit_report["rms_px"]),
-                     "locate_rms_px": float(np.sqrt(np.mean(err**2)))}
+                     "model": str(mapping.fit_report["model"]), "locate_rms_px": float(np.sqrt(np.mean(err**2)))}
