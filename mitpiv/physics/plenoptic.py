@@ -61,6 +61,11 @@ PRESETS: dict[str, dict] = {
     "lytro_like": dict(resolution=(3280, 3280), pixel_pitch_um=1.4, focal_length_mm=10.0, f_number=2.0,
                        focus_distance_mm=100.0, mla_pitch_um=14.0, mla_focal_length_um=28.0, mla_layout="rect",
                        mla_count=(328, 328)),
+    # Fahringer & Thurow's multi-plenoptic study (Table 1): the Lytro-like camera focused at
+    # S_o / p_M = 8 (S_o = 40 mm for the 5 mm aperture), 10 pixels of 1.4 um per 14 um lenslet.
+    "multiplenoptic_paper": dict(resolution=(3280, 3280), pixel_pitch_um=1.4, focal_length_mm=10.0, f_number=2.0,
+                                 focus_distance_mm=40.0, mla_pitch_um=14.0, mla_focal_length_um=28.0,
+                                 mla_layout="rect", mla_count=(328, 328)),
 }
 for _n in (800, 1600):
     for _pmr in (7, 14, 28):
@@ -482,6 +487,46 @@ class PlenopticCamera:
     def lenslet_exists(self, i, j) -> np.ndarray:
         col, row = self.axial_to_storage(i, j)
         return (col >= 0) & (col < self.mla_count[0]) & (row >= 0) & (row < self.mla_count[1])
+
+    def trace_to_sensor(self, p_local_mm, lens_xy_mm) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Light rays from camera-local points through main-lens points to the sensor (float64).
+
+        The forward (light-tracing) counterpart of :meth:`camera_rays`, the path of a
+        particle's light ray in the ``plenoptic`` sensor, without crosstalk rejection:
+        point ``P`` -> main-lens point ``a`` (thin lens, tangent ``t -> t - a/f``) -> MLA
+        plane at ``s_i`` -> the lenslet whose cell holds the ray (thin lens centred on
+        ``c``, ``t -> t - (x - c)/f_m``: the paper's refraction plus prism, its eq. 3) ->
+        sensor at ``g``. Tangents, not angles: exact for ideal thin lenses; the paraxial
+        ray-transfer matrices of Fahringer & Thurow (eqs. 1-4), which use angles, agree to
+        ``O(theta^3)`` (tests/physics/test_plenoptic_paper_optics.py).
+
+        Parameters
+        ----------
+        p_local_mm : (..., 3)
+            Source points in the camera-local frame (lens at the origin, ``z > 0`` in front).
+        lens_xy_mm : (..., 2)
+            Points on the main-lens plane the rays pass through.
+
+        Returns
+        -------
+        sensor_xy_mm (..., 2) in the sensor frame, lenslet (..., 2) int axial indices (i, j),
+        valid (...) bool: inside the aperture, in front of the lens, and the lenslet exists.
+        """
+        p = np.asarray(p_local_mm, dtype=float)
+        a = np.asarray(lens_xy_mm, dtype=float)
+        si, g, f = self.image_distance_mm, self.gap_mm, self.focal_length_mm
+        fm = self.mla_focal_length_um * 1e-3
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (a - p[..., :2]) / p[..., 2:3]  # tangent per unit distance travelled into the camera
+        t2 = t1 - a / f
+        xm = a + si * t2
+        i, j = self.nearest_lenslet(xm)
+        b = self.basis_mm
+        c = self.origin_mm + i[..., None] * b[0] + j[..., None] * b[1]
+        t3 = t2 - (xm - c) / fm
+        xs = xm + g * t3
+        valid = (np.sum(a * a, axis=-1) <= self.aperture_radius_mm**2) & (p[..., 2] > 0) & self.lenslet_exists(i, j)
+        return xs, np.stack([i, j], axis=-1), valid
 
     def camera_rays(self, uv_px, cell_uv) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """World rays of sensor points through points of their own lenslet (float64).

@@ -32,7 +32,14 @@ __all__ = [
     "PolynomialMapping",
     "mapping_from_metadata",
 ]
-from mitpiv.reconstruct.plenoptic import drt_mart, drt_weights, fuse, plenoptic_volume  # noqa: E402
+from mitpiv.reconstruct.plenoptic import (  # noqa: E402
+    drt_mart,
+    drt_weights,
+    fuse,
+    paper_refocus,
+    paper_view_weights,
+    plenoptic_volume,
+)
 from mitpiv.reconstruct.tomo import (  # noqa: E402
     WeightCache,
     mart,
@@ -44,4 +51,4 @@ from mitpiv.reconstruct.tomo import (  # noqa: E402
 )
 
 __all__ += ["VoxelGrid", "mlos", "mart", "WeightCache", "reconstruct_volume", "sapiv_refocus", "preprocess_images", "voxel_weights", "plenoptic_volume",
-            "fuse", "drt_weights", "drt_mart"]
+            "fuse", "paper_refocus", "paper_view_weights", "drt_weights", "drt_mart"]

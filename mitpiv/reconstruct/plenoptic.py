@@ -5,7 +5,11 @@ dense-ray-tracing MART (DRT-MART) from a raw light-field image.
   (:func:`mitpiv.lightfield.refocus_volume`), additive, or the multiplicative MLOS form
   ``E = (prod_uv L_uv^w(u,v))^(exponent / sum w)`` with white-image weights ``w(u,v)``.
 * :func:`fuse`: multi-plenoptic fusion (Fahringer & Thurow): each camera's volume
-  normalised by a normal fit of its histogram, then ``(prod_m V_m)^(1/M)``.
+  normalised by a normal fit of its histogram, then ``(prod_m V_m)^(gamma_M)``, ``gamma_M
+  = 1/M`` (their eq. 15).
+* :func:`paper_refocus`, :func:`paper_view_weights`: Fahringer & Thurow's single-camera
+  volumetric refocusing by their definitions, additive (eq. 13) and multiplicative (eq. 14),
+  with their white-image weights ``w(u, v)`` and rescaling exponent ``gamma_L``.
 * :func:`drt_mart`: every raw pixel's ray bundle traced through its lenslet and the main
   lens (:meth:`PlenopticCamera.camera_rays`) into the grid; the weight of voxel ``j`` for
   pixel ``i`` is the fraction of the bundle crossing it (per grid slab along the camera's
@@ -29,7 +33,8 @@ from mitpiv.progress import Progress, bar, track
 from mitpiv.reconstruct._kernels import kernels
 from mitpiv.reconstruct.tomo import check_iterations
 
-__all__ = ["plenoptic_volume", "fuse", "drt_weights", "drt_mart", "FUSE_NORMALISATIONS"]
+__all__ = ["plenoptic_volume", "fuse", "paper_refocus", "paper_view_weights", "drt_weights", "drt_mart",
+           "FUSE_NORMALISATIONS"]
 
 FUSE_NORMALISATIONS = ("histogram", "max", "none")
 
@@ -74,8 +79,111 @@ def plenoptic_volume(lf: LightField, grid: VoxelGrid, *, method: str = "additive
     return vol
 
 
-def fuse(volumes, *, normalise: str = "histogram") -> np.ndarray:
-    """Fuse the volumes of several (plenoptic) cameras on one grid: ``(prod_m V_m')^(1/M)``.
+def paper_view_weights(white: LightField) -> np.ndarray:
+    """Fahringer & Thurow's weighting function of the views, from a white light field.
+
+    ``w(u, v) = sum_{s, t} L(u, v, s, t)`` of the light field of an image of a uniformly
+    bright background, linearly scaled to ``0 <= w <= 1`` (divided by its maximum: the views
+    outside the lenslet image of the aperture collect nothing, so the minimum is 0). About 1
+    for the views at the centre of the lenslet images, about 0 at their vignetted edge.
+
+    Parameters
+    ----------
+    white : LightField
+        The decoded white image (``decode(white_raw, optics=...)``, not devignetted).
+
+    Returns
+    -------
+    (n_v, n_u) float64 weights
+    """
+    if not isinstance(white, LightField):
+        raise ConfigError(f"paper_view_weights: 'white' must be a LightField, got {type(white).__name__}.")
+    w = np.asarray(white.data, dtype=np.float64)[:, :, white.valid].sum(axis=2)
+    top = float(w.max())
+    if not (np.isfinite(top) and top > 0):
+        raise ConfigError("paper_view_weights: the white light field is dark; render or record a bright white image.")
+    return w / top
+
+
+def paper_refocus(lf: LightField, grid: VoxelGrid, *, equation: int, weights=None, gamma_l: float | None = None,
+                  floor: float = 0.0, min_view_fraction: float = 0.5, progress: Progress = None) -> np.ndarray:
+    """Fahringer & Thurow's volumetric refocusing of one plenoptic camera onto ``grid``.
+
+    A voxel at camera-local ``(x, y, z)`` (``z`` its distance in front of the main lens)
+    collects, from every view ``(u, v)`` (a main-lens point), the light field at the point
+    where the ray from ``(u, v)`` through the voxel meets the lenslet plane (``d_M`` the
+    lens-to-array distance, ``f_M`` the main-lens focal length)::
+
+        s' = u + d_M ((u - x) / z - u / f_M),   t' = v + d_M ((v - y) / z - v / f_M)
+
+    eq. 13 (additive)::
+
+        V(x, y, z) = sum_u sum_v L(u, v, s', t')
+
+    eq. 14 (multiplicative, MLOS-like)::
+
+        V(x, y, z) = [ prod_u prod_v L(u, v, s', t')^w(u, v) ]^gamma_L
+
+    The sums and products run over the views of the decoded light field (the paper's
+    discrete sum, which it found "nearly identical" to quadrature), ``L`` sampled bilinearly
+    between lenslets.
+
+    Parameters
+    ----------
+    lf : LightField
+        Decoded light field with its optics.
+    grid : VoxelGrid
+    equation : 13 or 14
+    weights : (n_v, n_u), optional
+        Eq. 14's ``w(u, v)`` (:func:`paper_view_weights`; default ``lf.view_weights``).
+        Eq. 13 uses every view with weight 1 (the paper's aperture function ``A = 1``).
+    gamma_l : float > 0, optional
+        Eq. 14's rescaling exponent, which the paper chooses so that the reconstruction's
+        intensity histogram approximately equals that of the sub-aperture images; default
+        ``1 / sum w`` (the weighted geometric mean, in the images' intensity units). The
+        paper's "typically about the reciprocal of the number of pixels under each lenslet"
+        (``1 / pmr^2``) is this value when every view has weight 1.
+    floor : float >= 0
+        Eq. 14 only: light-field samples below ``floor`` are raised to it (e.g. one count of
+        the integer images), so that a dark sample in a low-weight view scales a voxel down
+        by ``floor^w`` instead of zeroing it, the behaviour the paper describes ("the low
+        intensity sub-aperture images being nearly uniformly equal to ones"); 0: strict
+        (``0^w = 0``: any dark view with ``w > 0`` zeroes the voxel).
+    min_view_fraction : float
+        Voxels reached by less than this fraction of the views (eq. 13) or of the view
+        weight (eq. 14) are zero (the volume's borders, outside the light field).
+
+    Returns
+    -------
+    (n_z, n_y, n_x) float32 volume
+    """
+    if equation not in (13, 14):
+        raise ConfigError(f"paper_refocus: 'equation' must be 13 (additive) or 14 (multiplicative), got {equation!r}.")
+    n_views = lf.data.shape[0] * lf.data.shape[1]
+    if equation == 13:
+        vol = refocus_volume(lf, grid.x_mm, grid.y_mm, grid.z_mm, method="additive",
+                             weights=np.ones(lf.data.shape[:2]), min_view_fraction=min_view_fraction, progress=progress)
+        return (vol * np.float32(n_views)).astype(np.float32)  # the mean over views -> the sum
+    w = lf.view_weights if weights is None else np.asarray(weights, dtype=np.float64)
+    if gamma_l is None:
+        gamma_l = 1.0 / float(np.sum(w))
+    if not (np.isfinite(gamma_l) and gamma_l > 0):
+        raise ConfigError(f"paper_refocus: 'gamma_l' must be finite and > 0, got {gamma_l!r}.")
+    if not (np.isfinite(floor) and floor >= 0):
+        raise ConfigError(f"paper_refocus: 'floor' must be finite and >= 0, got {floor!r}.")
+    if floor > 0:
+        from dataclasses import replace
+
+        lf = replace(lf, data=np.maximum(lf.data, np.float32(floor)))
+    # refocus_volume's multiplicative form is (prod L^w)^(1 / sum w): raised to gamma_L sum w
+    return plenoptic_volume(lf, grid, method="multiplicative", weights=w, exponent=float(gamma_l * np.sum(w)),
+                            min_view_fraction=min_view_fraction, progress=progress)
+
+
+def fuse(volumes, *, normalise: str = "histogram", gamma_m: float | None = None) -> np.ndarray:
+    """Fuse the volumes of several (plenoptic) cameras on one grid (Fahringer & Thurow, eq. 15)::
+
+        V_c(x, y, z) = prod_{i=1}^{M} V_i'(x, y, z)^gamma_M,    gamma_M = 1 / M
 
     Parameters
     ----------
@@ -85,6 +193,8 @@ def fuse(volumes, *, normalise: str = "histogram") -> np.ndarray:
         likelihood: mean ``mu``, std ``sigma``) and mapped to ``max(V - mu, 0) / sigma``,
         its signal in units of its own spread above its mean level, so cameras of different
         brightness weigh equally; max: divided by its maximum; none: as given.
+    gamma_m : float > 0, optional
+        The rescaling exponent (default the paper's ``1 / M``).
 
     Returns
     -------
@@ -109,7 +219,10 @@ def fuse(volumes, *, normalise: str = "histogram") -> np.ndarray:
             v = v / v.max() if v.max() > 0 else v
         with np.errstate(divide="ignore"):
             acc += np.log(v)
-    return np.exp(acc / len(vols)).astype(np.float32)
+    g = 1.0 / len(vols) if gamma_m is None else float(gamma_m)
+    if not (np.isfinite(g) and g > 0):
+        raise ConfigError(f"fuse: 'gamma_m' must be finite and > 0, got {gamma_m!r}.")
+    return np.exp(acc * g).astype(np.float32)
 
 
 # ---------------------------------------------------------------------- DRT-MART

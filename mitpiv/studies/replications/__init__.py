@@ -6,4 +6,5 @@ name (``mitpiv replicate NAME``) to the module, imported on first use."""
 MODULES: dict[str, str] = {
     "sapiv-distortion": "mitpiv.studies.replications.sapiv_distortion",
     "channel-tomo": "mitpiv.studies.replications.channel_tomo",
+    "multi-plenoptic": "mitpiv.studies.replications.multi_plenoptic",
 }

@@ -1,0 +1,112 @@
+"""Fahringer & Thurow's plenoptic refocusing by their definitions, each against its equation
+written afresh in float64: additive (eq. 13), multiplicative with white-image weights (eq. 14)
+and the multi-camera combination (eq. 15)."""
+
+import numpy as np
+import pytest
+from scipy.interpolate import RegularGridInterpolator
+
+from mitpiv.errors import ConfigError
+from mitpiv.grid import VoxelGrid
+from mitpiv.lightfield import decode
+from mitpiv.physics.plenoptic import PRESETS, PlenopticCamera
+from mitpiv.reconstruct import fuse, paper_refocus, paper_view_weights
+
+# float32 light-field storage and kernels against float64 here: relative 1e-5 (a product of
+# ~80 powers in log space, float32 eps 6e-8 per term, exponentiated).
+REL_TOL = 1e-5
+
+
+def _camera():
+    return PlenopticCamera(**{**PRESETS["multiplenoptic_paper"], "resolution": (160, 160), "mla_count": (16, 16)})
+
+
+def _light_field(seed=0):
+    cam = _camera()
+    rng = np.random.default_rng(seed)
+    raw = rng.uniform(0.2, 1.0, (160, 160)).astype(np.float32)  # strictly positive: every view sees light
+    lf = decode(raw, optics=cam)
+    return cam, lf
+
+
+def _grid():
+    # voxels whose rays stay inside the decoded lenslet grid (+-0.091 mm on the array: +-0.27 mm
+    # at S_o = 40 mm, less the views' parallax)
+    return VoxelGrid(origin_mm=(-0.1, -0.1, 39.0), voxel_mm=(0.05, 0.05, 0.5), shape=(5, 4, 4))
+
+
+def eq14_afresh(lf, cam, grid, w, gamma_l, *, multiplicative=True):
+    """Eqs. 13 / 14 written from the paper: s' = u + d_M ((u - x)/z - u/f_M), L sampled bilinearly."""
+    d_m, f_m = cam.image_distance_mm, cam.focal_length_mm
+    a = lf.aperture_mm  # main-lens coordinate of each angular sample (u and v alike)
+    z, y, x = np.meshgrid(grid.z_mm, grid.y_mm, grid.x_mm, indexing="ij")  # lens at the origin, looking along +z
+    out = np.zeros(x.shape) if not multiplicative else np.ones(x.shape)
+    for iv, v in enumerate(a):
+        for iu, u in enumerate(a):
+            s1 = u + d_m * ((u - x) / z - u / f_m)
+            t1 = v + d_m * ((v - y) / z - v / f_m)
+            f = RegularGridInterpolator((lf.t_mm, lf.s_mm), lf.data[iv, iu].astype(np.float64), method="linear")
+            val = f(np.stack([t1.ravel(), s1.ravel()], -1)).reshape(x.shape)
+            if multiplicative:
+                out *= val ** w[iv, iu]
+            else:
+                out += val
+    return out**gamma_l if multiplicative else out
+
+
+def test_eq14_multiplicative_against_the_equation():
+    cam, lf = _light_field()
+    grid = _grid()
+    w = np.random.default_rng(1).uniform(0.0, 1.0, lf.data.shape[:2])
+    gamma_l = 0.01  # the paper's typical value: 1 / (pixels under a lenslet)
+    ours = paper_refocus(lf, grid, equation=14, weights=w, gamma_l=gamma_l)
+    ref = eq14_afresh(lf, cam, grid, w, gamma_l)
+    np.testing.assert_allclose(ours, ref, rtol=REL_TOL)
+    # the default gamma_L = 1 / sum w: the weighted geometric mean (histogram of the views)
+    np.testing.assert_allclose(paper_refocus(lf, grid, equation=14, weights=w),
+                               eq14_afresh(lf, cam, grid, w, 1.0 / w.sum()), rtol=REL_TOL)
+    # a floor raises dark samples: with every sample above it, nothing changes
+    np.testing.assert_allclose(paper_refocus(lf, grid, equation=14, weights=w, gamma_l=gamma_l, floor=0.1), ref,
+                               rtol=REL_TOL)
+
+
+def test_eq13_additive_against_the_equation():
+    cam, lf = _light_field(3)
+    grid = _grid()
+    ours = paper_refocus(lf, grid, equation=13)
+    ref = eq14_afresh(lf, cam, grid, None, None, multiplicative=False)
+    np.testing.assert_allclose(ours, ref, rtol=REL_TOL)
+
+
+def test_view_weights_from_a_white_image():
+    """w(u, v) = sum_st L_white(u, v, s, t), scaled to [0, 1]: 1 at the centre views, 0 outside
+    the lenslet image of the aperture."""
+    cam = _camera()
+    white = np.zeros((160, 160), np.float32)
+    cen = cam.image_centres_px().reshape(-1, 2)
+    uu, vv = np.meshgrid(np.arange(160) + 0.5, np.arange(160) + 0.5)
+    r_img_px = cam.aperture_radius_mm * cam.gap_mm / cam.image_distance_mm / (cam.pixel_pitch_um * 1e-3)
+    for c in cen:  # each lenslet images the aperture disk
+        white[np.hypot(uu - c[0], vv - c[1]) < r_img_px] = 1.0
+    lf = decode(white, optics=cam, interpolation="nearest")
+    w = paper_view_weights(lf)
+    ref = lf.data.astype(np.float64)[:, :, lf.valid].sum(axis=2)
+    np.testing.assert_allclose(w, ref / ref.max(), rtol=1e-12)
+    assert w.max() == 1.0 and w.min() == 0.0
+    du = lf.du_px
+    inside = np.hypot(du[None, :], du[:, None]) < r_img_px - 0.5
+    assert np.all(w[inside] == 1.0) and np.all(w[np.hypot(du[None, :], du[:, None]) > r_img_px + 0.75] == 0.0)
+    with pytest.raises(ConfigError, match="dark"):
+        paper_view_weights(decode(np.zeros((160, 160), np.float32), optics=cam))
+
+
+def test_eq15_multi_camera_combination():
+    rng = np.random.default_rng(4)
+    vols = [rng.uniform(0.1, 2.0, (3, 4, 5)) for _ in range(3)]
+    ref = (vols[0] * vols[1] * vols[2]) ** (1.0 / 3.0)  # eq. 15 with gamma_M = 1 / M
+    np.testing.assert_allclose(fuse(vols, normalise="none"), ref, rtol=1e-6)
+    np.testing.assert_allclose(fuse(vols, normalise="none", gamma_m=0.5), (vols[0] * vols[1] * vols[2]) ** 0.5, rtol=1e-6)
+    with pytest.raises(ConfigError, match="gamma_m"):
+        fuse(vols, gamma_m=0.0)
+    with pytest.raises(ConfigError, match="equation"):
+        paper_refocus(_light_field()[1], _grid(), equation=12)

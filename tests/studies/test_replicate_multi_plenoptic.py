@@ -1,0 +1,148 @@
+"""The multi-plenoptic replication (Fahringer & Thurow): its quick run (schema, required ids,
+curves) and the study's definitions written afresh: the system's geometry (Table 1,
+S_o / p_M, the 1:4 volume), Q (eq. 16) and Q* (eq. 17), the density (particles per
+reconstructed pixel) and the light-ray image model's energy bookkeeping."""
+
+import math
+
+import numpy as np
+import pytest
+
+from mitpiv.analysis.quality import quality_q, quality_q_zero_mean
+from mitpiv.studies import multiplenoptic_sim as S
+from mitpiv.studies.replication import RESULTS_KEYS, replicate
+from mitpiv.studies.replications.multi_plenoptic import STUDY
+
+# float64 sums over ~1e4 voxels: round-off ~1e-13; 1e-12 leaves room.
+EQ_RTOL = 1e-12
+
+
+def test_quick_run_schema_and_ids(tmp_path):
+    res = replicate("multi-plenoptic", tmp_path, quick=True)
+    assert set(RESULTS_KEYS) <= set(res)
+    assert res["scale"] == "quick" and res["study"] == "multi-plenoptic"
+    ids = [r["id"] for r in res["rows"]]
+    assert len(ids) == len(set(ids)) and set(STUDY.required_ids) <= set(ids)
+    for r in res["rows"]:
+        assert {"id", "quantity", "paper_source", "paper", "ours", "tolerance", "agrees", "note"} <= set(r)
+    for name in ("Qstar_vs_So_pM", "fig8_Qstar_vs_angle", "fig8_z_u95_vox_vs_angle", "fig9_rms_vox_vs_ppp",
+                 "fig9_outlier_ratio_vs_ppp", "fig4_Q_Qstar_vs_ppp"):
+        c = res["curves"][name]
+        assert all(len(v) == len(c["x"]) for v in c["y"].values())
+    rows = {r["id"]: r for r in res["rows"]}
+    q2 = res["curves"]["fig8_Qstar_vs_angle"]["y"]["2 plenoptic"]
+    assert all(0.0 < q < 1.0 for q in q2)  # a reconstruction that correlates with the truth
+    # two cameras see depth better than one (the paper's headline; true even on the quick crop)
+    z = res["curves"]["fig8_z_u95_vox_vs_angle"]["y"]
+    assert rows["z_unc_ratio_1cam_over_2cam"]["ours"] > 0 and z["2 plenoptic"][0] > 0
+    assert rows["So_pM_optimum"]["ours"] in (4.0, 8.0, 16.0)
+    assert (tmp_path / "report.md").is_file() and (tmp_path / "fig8_Qstar_vs_angle.png").is_file()
+
+
+def test_system_geometry_is_the_papers():
+    """S_o / p_M = 8: S_o = 40 mm, s_i = 1 / (1/10 - 1/40) = 13.33 mm, |M| = 1/3; a lenslet's
+    footprint (the voxel) 14 um / |M| = 42 um; the full field of view 328 of them; the volume
+    1:4 thick."""
+    si = 1.0 / (1.0 / 10.0 - 1.0 / 40.0)
+    vox = 14e-3 * 40.0 / si
+    assert S.voxel_mm(8.0) == pytest.approx(vox, rel=1e-12)
+    lo, hi, full_w = S.volume_box(8.0, 0.25, 96)
+    assert full_w == pytest.approx(328 * vox, rel=1e-12)
+    assert hi[2] - lo[2] == pytest.approx(full_w / 4, rel=1e-12) and hi[0] - lo[0] == pytest.approx(96 * vox)
+    g = S.volume_grid(8.0, 0.25, 96)
+    assert g.shape == (82, 96, 96)
+    cam = S.plenoptic_camera(8.0, 25.0, 180.0, 96)
+    assert cam.focus_distance_mm == 40.0 and cam.aperture_diameter_mm == pytest.approx(5.0)
+    assert cam.resolution == (960, 960) and cam.mla_count == (96, 96)
+    # 25 deg from the volume's z axis, on the -x side (azimuth 180), 40 mm from the centre
+    pos = cam.to_world_mitsuba[:3, 3]
+    assert np.linalg.norm(pos) == pytest.approx(40.0)
+    assert math.degrees(math.acos(pos[2] / 40.0)) == pytest.approx(25.0) and pos[0] < 0
+    # the volume centre is imaged on the sensor centre (chief ray)
+    np.testing.assert_allclose(cam.project(np.zeros(3)), [480.0, 480.0], atol=1e-9)
+    std = S.standard_camera(8.0, 25.0, 180.0, 96, 20.0)
+    np.testing.assert_allclose(std.project(np.zeros(3)), [48.0, 48.0], atol=1e-9)
+
+
+def test_density_is_particles_per_reconstructed_pixel():
+    p0, p1 = S.particles(8.0, 0.25, 96, 0.023, seed=3)
+    assert len(p0) == round(0.023 * 96**2)
+    lo, hi, _ = S.volume_box(8.0, 0.25, 96)
+    assert np.all(p0 >= lo) and np.all(p0 <= hi)
+    d = np.linalg.norm(p1 - p0, axis=1)
+    assert 0 < d.max() < 6 * S.voxel_mm(8.0)  # displacements of a few voxels
+
+
+def test_q_and_q_star_eqs_16_17():
+    rng = np.random.default_rng(0)
+    v = rng.random((6, 7, 8)) ** 4
+    t = v + 0.3 * rng.random((6, 7, 8))
+    q16 = np.sum(v * t) / math.sqrt(np.sum(v * v) * np.sum(t * t))  # eq. 16
+    vh, th = v - v.mean(), t - t.mean()  # eq. 17: the zero-mean fields
+    q17 = np.sum(vh * th) / math.sqrt(np.sum(vh * vh) * np.sum(th * th))
+    assert quality_q(v, t) == pytest.approx(q16, rel=EQ_RTOL)
+    assert quality_q_zero_mean(v, t) == pytest.approx(q17, rel=EQ_RTOL)
+    # Q* ignores a uniform offset; at dense seeding both fields approach a uniform level and Q
+    # approaches 1 whatever the reconstruction (Fig. 4), while Q* of uncorrelated fields is ~0
+    assert quality_q_zero_mean(v + 1.0, t) == pytest.approx(q17, rel=1e-9)
+    a, b = 1.0 + 0.1 * rng.random((20, 20, 20)), 1.0 + 0.1 * rng.random((20, 20, 20))
+    assert quality_q(a, b) > 0.99 and abs(quality_q_zero_mean(a, b)) < 0.1
+
+
+def test_light_ray_images_keep_every_ray_that_reaches_the_sensor():
+    """One particle in focus on the axis: every ray passes the aperture and lands on the sensor,
+    so the image's sum is the sum of the rays' Gaussian weights (area splitting conserves it),
+    and its light gathers under the 3 x 3 lenslets round its image (in focus)."""
+    cam = S.plenoptic_camera(8.0, 0.0, 0.0, 16)
+    vox = S.voxel_mm(8.0)
+    p = np.array([[0.5 * vox, 0.5 * vox, 0.0]])  # imaged on a lenslet centre (the axis lies between lenslets)
+    img = S.render_plenoptic(cam, p, sigma_mm=0.7 * vox, rays=20000, seed=1)
+    rng = np.random.default_rng(1)
+    _, wt = S._sources(p, 0.7 * vox, 20000, rng)
+    assert img.sum() == pytest.approx(wt.sum(), rel=1e-9)
+    centres = cam.image_centres_px().reshape(-1, 2)
+    near = np.linalg.norm(centres - cam.project(p)[0], axis=1).argmin()
+    c = centres[near]
+    # the Gaussian source (sigma 0.7 voxel = 0.7 lenslet) puts ~93 % within +-1.5 lenslets
+    box = img[int(c[1]) - 15 : int(c[1]) + 15, int(c[0]) - 15 : int(c[0]) + 15]
+    assert box.sum() > 0.85 * img.sum()
+
+
+def test_standard_camera_calibrated_from_rendered_targets():
+    """The MART cameras' calibration (the paper's "series of calibration images"): dot targets
+    rendered through the same optics, located and fitted, reproduce the true projection over
+    the volume to a small fraction of a pixel."""
+    n = 64
+    mapping, rep = S.calibrate_standard(8.0, 0.25, 25.0, 180.0, n, 20.0, rays=2000)
+    cam = S.standard_camera(8.0, 25.0, 180.0, n, 20.0)
+    lo, hi, _ = S.volume_box(8.0, 0.25, n)
+    pts = np.random.default_rng(1).uniform(lo, hi, (300, 3))
+    err = np.linalg.norm(mapping.project(pts) - cam.project(pts), axis=1)
+    assert rep["markers"] >= 20 and rep["rms_px"] < 0.2
+    assert np.sqrt(np.mean(err**2)) < 0.1  # dot location ~0.04 px (measured), averaged by the fit
+
+
+def test_scene_is_the_papers_system():
+    """scenes/multiplenoptic_paper (the Mitsuba version of the study) carries Table 1 and
+    S_o / p_M = 8 exactly, and its cropped experiment validates."""
+    import xml.etree.ElementTree as ET
+    from pathlib import Path
+
+    from mitpiv.physics.plenoptic import PRESETS
+    from mitpiv.render.scene import scene_defaults
+    from mitpiv.studies.runner import load_experiment
+
+    root = Path(__file__).resolve().parents[2] / "scenes" / "multiplenoptic_paper"
+    d = scene_defaults(root / "scene.xml")
+    assert (int(d["lenslets"]), int(d["resolution"]), float(d["focus_distance_mm"])) == (328, 3280, 40.0)
+    assert float(d["thickness_mm"]) == pytest.approx(S.volume_box(8.0, 0.25, 328)[2] / 4, abs=1e-3)
+    sensors = {s.get("id"): s for s in ET.parse(root / "scene.xml").getroot().iter("sensor")}
+    assert {"plen0", "plen1", "plen2", "plen3", "pin0", "pin1"} <= set(sensors)
+    vals = {f.get("name"): f.get("value") for f in sensors["plen0"].iter("float")}
+    p = PRESETS["multiplenoptic_paper"]
+    assert float(vals["focal_length_mm"]) == p["focal_length_mm"] and float(vals["aperture_diameter_mm"]) == 5.0
+    assert float(vals["pixel_pitch_um"]) == p["pixel_pitch_um"] and float(vals["mla_pitch_um"]) == p["mla_pitch_um"]
+    assert float(vals["mla_focal_length_um"]) == p["mla_focal_length_um"]
+    cfg = load_experiment(root / "experiment.toml")
+    assert cfg.reconstruction.voxel_mm == pytest.approx(S.voxel_mm(8.0), abs=1e-4)
+    assert cfg.sensor.bit_depth == 16
