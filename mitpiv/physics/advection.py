@@ -6,7 +6,7 @@ import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
 
-__all__ = ["advect"]
+__all__ = ["advect", "rk4_steps"]
 
 
 def advect(positions_mm, flow, *, dt_s: float, t0_s: float = 0.0, substeps: int = 10) -> np.ndarray:
@@ -26,8 +26,14 @@ def advect(positions_mm, flow, *, dt_s: float, t0_s: float = 0.0, substeps: int 
     dt = check_positive("dt_s", dt_s, owner="advect", unit="s")
     if int(substeps) != substeps or substeps < 1:
         raise ConfigError(f"advect: 'substeps' must be a positive integer, got {substeps!r}.")
+    return rk4_steps(positions_mm, flow, t0_s=t0_s, dt_s=dt, substeps=int(substeps))
+
+
+def rk4_steps(positions_mm, flow, *, t0_s: float, dt_s: float, substeps: int) -> np.ndarray:
+    """Positions (N, 3) [mm] after ``dt_s`` (may be negative: backward in time) of classical
+    RK4 in ``substeps`` equal steps from time ``t0_s``; no argument checks (see :func:`advect`)."""
     p = np.array(positions_mm, dtype=np.float64).reshape(-1, 3)
-    h = dt / substeps
+    h = float(dt_s) / int(substeps)
     t = float(t0_s)
     for _ in range(int(substeps)):
         k1 = flow(p, t)

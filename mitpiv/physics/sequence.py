@@ -42,18 +42,10 @@ RESEED = ("inflow", "uniform")
 
 def rk4(positions_mm, flow, *, t0_s: float, dt_s: float, substeps: int) -> np.ndarray:
     """Positions (N, 3) [mm] after ``dt_s`` (may be negative: backward) of RK4 in
-    ``substeps`` equal steps from time ``t0_s``."""
-    p = np.array(positions_mm, dtype=np.float64).reshape(-1, 3)
-    h = float(dt_s) / int(substeps)
-    t = float(t0_s)
-    for _ in range(int(substeps)):
-        k1 = flow(p, t)
-        k2 = flow(p + 0.5 * h * k1, t + 0.5 * h)
-        k3 = flow(p + 0.5 * h * k2, t + 0.5 * h)
-        k4 = flow(p + h * k3, t + h)
-        p = p + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
-        t += h
-    return p
+    ``substeps`` equal steps from time ``t0_s`` (:func:`mitpiv.physics.advection.rk4_steps`)."""
+    from mitpiv.physics.advection import rk4_steps
+
+    return rk4_steps(positions_mm, flow, t0_s=t0_s, dt_s=dt_s, substeps=substeps)
 
 
 @dataclass

@@ -132,13 +132,19 @@ class SeedingTable(Table):
 
 
 @cache
-def _flow_union():
+def flow_union(prefix: str = "Flow", dt_description: str = "time between the two frames [s]"):
+    """The ``[flow]`` table: one model per flow kind (generated from the flow classes'
+    signatures) plus ``dt_s``, discriminated by ``kind``; shared by the experiment kinds."""
     from mitpiv.physics.flows import FLOW_KINDS
 
-    dt = (PosFloat, Field(..., description="time between the two frames [s]"))
-    models = {kind: model_from_signature(f"Flow_{kind}", cls, extra_fields={"dt_s": dt})
+    dt = (PosFloat, Field(..., description=dt_description))
+    models = {kind: model_from_signature(f"{prefix}_{kind}", cls, extra_fields={"dt_s": dt})
               for kind, cls in FLOW_KINDS.items()}
     return discriminated(models)
+
+
+def _flow_union():
+    return flow_union()
 
 
 class RenderTable(Table):

@@ -53,7 +53,7 @@ from pydantic import Field, model_validator
 from mitpiv.errors import CalibrationError, ConfigError
 from mitpiv.studies.kinds.tomo import SceneTable
 from mitpiv.studies.runner import RENDER_PACKAGES, Kind, Stage, StageContext
-from mitpiv.studies.schema import Table, Vec3, discriminated, model_from_signature
+from mitpiv.studies.schema import Table, Vec3
 
 PosFloat = Annotated[float, Field(gt=0)]
 PosInt = Annotated[int, Field(ge=1)]
@@ -94,14 +94,10 @@ class SeedingTable(Table):
         return self
 
 
-@cache
 def _flow_union():
-    from mitpiv.physics.flows import FLOW_KINDS
+    from mitpiv.studies.kinds.tomo import flow_union
 
-    dt = (PosFloat, Field(..., description="time between consecutive frames [s]"))
-    models = {kind: model_from_signature(f"TrackingFlow_{kind}", cls, extra_fields={"dt_s": dt})
-              for kind, cls in FLOW_KINDS.items()}
-    return discriminated(models)
+    return flow_union("TrackingFlow", "time between consecutive frames [s]")
 
 
 class SequenceTable(Table):
