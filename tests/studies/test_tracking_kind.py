@@ -162,3 +162,15 @@ def test_a_sequence_of_one_frame_is_reconstructed_without_velocities():
     m = score(tr, seq)
     assert m["yield"] > 0.95 and m["ghost_fraction"] < 0.05
     assert "velocity_error_mm_s" not in m  # no velocities: no velocity error (the kind reports None and why)
+
+
+def test_a_calibration_worse_than_the_triangulation_tolerance_is_refused():
+    """Issue 27's hard case: a reprojection error that reaches the allowed triangulation error
+    would make IPR drop true particles silently; it is refused, naming both numbers."""
+    seq, images, cams, otf = synthetic(1, count=5)
+    with pytest.raises(ConfigError, match="reprojection error"):
+        track_images(images, cams, otf, dt_s=0.005, lower_mm=LO, upper_mm=HI,
+                     tracking=TrackingTable(tolerance_px=1.0), calibration_error_px=1.5)
+    tr = track_images(images, cams, otf, dt_s=0.005, lower_mm=LO, upper_mm=HI,
+                      tracking=TrackingTable(tolerance_px=1.0), calibration_error_px=0.05)
+    assert score(tr, seq)["yield"] > 0.9

@@ -519,14 +519,19 @@ def stage_otf(ctx: StageContext) -> dict:
             "fitted_from": int(sum(p.shape[0] for p in pts_all)), "source": o.source}
 
 
-def track_images(sequence, cameras, otf, *, dt_s: float, lower_mm, upper_mm, tracking, progress=None):
+def track_images(sequence, cameras, otf, *, dt_s: float, lower_mm, upper_mm, tracking,
+                 calibration_error_px: float | None = None, progress=None):
     """Track a sequence (list of frames, each a list of per-camera images) with the
     settings of a [tracking] table: STB for 4 frames or more; fewer, IPR per frame (every
-    particle a track of one frame, no velocities). Returns :class:`~mitpiv.tracking.stb.Tracks`."""
+    particle a track of one frame, no velocities). ``calibration_error_px``: the
+    calibration's reprojection error, when known; IPR refuses a triangulation tolerance that
+    does not exceed it. Returns :class:`~mitpiv.tracking.stb.Tracks`."""
     from mitpiv.tracking import Tracks, ipr, stb
 
     t = tracking
     opts = {"tolerance_px": t.tolerance_px, "outer_loops": t.outer_loops, "reduced_loops": t.reduced_loops}
+    if calibration_error_px is not None:
+        opts["calibration_error_px"] = float(calibration_error_px)
     if len(sequence) >= STB_MIN_FRAMES:
         return stb(sequence, cameras, otf, dt_s=dt_s, lower_mm=lower_mm, upper_mm=upper_mm, search_px=t.search_px,
                    predict_px=t.predict_px, max_shake_px=t.max_shake_px, velocity_guess=t.velocity_guess_mm_s,
@@ -551,8 +556,9 @@ def stage_track(ctx: StageContext) -> dict:
     otf = load_otf(ctx.run_dir)
     lo, hi = bounds_of(cfg)
     seq = [frame_images(ctx.run_dir, f)[0] for f in range(cfg.sequence.frames)]
+    fit = [e for e in (ctx.results.get("calibrate") or {}).get("fit_rms_px") or [] if e is not None]
     tr = track_images(seq, cams, otf, dt_s=cfg.flow.dt_s, lower_mm=lo, upper_mm=hi, tracking=cfg.tracking,
-                      progress=ctx.progress)
+                      calibration_error_px=max(fit) if fit else None, progress=ctx.progress)
     write_tracks_npz(ctx.out / "tracks.npz", tr)
     lengths = tr.lengths
     return {"n_tracks": tr.n_tracks, "mean_track_length": float(lengths.mean()) if lengths.size else 0.0,
