@@ -54,6 +54,27 @@ def window_stats(img, uv, half=4):
     return np.array(out)
 
 
+def sensor_xml(sid: str, az: float, *, lens: str = "", res: int = 24, rfilter: str | None = None) -> str:
+    """XML of a ``distorted_pinhole`` at azimuth ``az``, elevation 50 deg, 600 mm from the
+    origin (85 mm lens, 20 um pixels, ``res`` x ``res``); ``lens``: extra property lines;
+    ``rfilter``: the film's reconstruction filter (None: Mitsuba's default)."""
+    rf = "" if rfilter is None else f'\n            <rfilter type="{rfilter}"/>'
+    return f"""    <sensor type="distorted_pinhole" id="{sid}">
+        <float name="azimuth_deg" value="{az}"/>
+        <float name="elevation_deg" value="50"/>
+        <float name="distance_mm" value="600"/>
+        <float name="focal_length_mm" value="85"/>
+        <float name="pixel_pitch_um" value="20"/>
+        {lens}
+        <film type="hdrfilm">
+            <integer name="width" value="{res}"/>
+            <integer name="height" value="{res}"/>
+            <string name="pixel_format" value="luminance"/>{rf}
+        </film>
+    </sensor>
+"""
+
+
 def particle_scene_xml(sensors: str, *, integrator: str = '<integrator type="particle_tracer"/>',
                        laser: str = '<float name="thickness" value="3"/>', defaults: str = "") -> str:
     """A scene XML of tracer particles (``particles_$frame.ply`` beside it) in a 3 mm laser

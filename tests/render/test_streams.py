@@ -12,22 +12,8 @@ from mitpiv.io import read_exr, write_particles_ply
 from mitpiv.render.render import render_scene
 from mitpiv.render.scene import load_scene
 
-from .helpers import camera, particle_scene_xml, render, scene
+from .helpers import camera, particle_scene_xml, render, scene, sensor_xml
 
-_SENSOR = """    <sensor type="distorted_pinhole" id="{sid}">
-        <float name="azimuth_deg" value="{az}"/>
-        <float name="elevation_deg" value="50"/>
-        <float name="distance_mm" value="600"/>
-        <float name="focal_length_mm" value="85"/>
-        <float name="pixel_pitch_um" value="20"/>
-        {lens}
-        <film type="hdrfilm">
-            <integer name="width" value="24"/>
-            <integer name="height" value="24"/>
-            <string name="pixel_format" value="luminance"/>
-        </film>
-    </sensor>
-"""
 THIN_LENS = '<float name="f_number" value="2"/><float name="focus_distance_mm" value="560"/>'
 # Monte Carlo checks: N_SIGMA standard errors (two-sided p 5.7e-7 for a normal statistic).
 N_SIGMA = 5
@@ -37,7 +23,7 @@ def _xml(tmp_path, lens=THIN_LENS):
     rng = np.random.default_rng(8)
     for k in (0, 1):
         write_particles_ply(tmp_path / f"particles_{k}.ply", rng.uniform(-1.5, 1.5, (40, 3)), 1.5, proxy_radius_mm=0.01)
-    sensors = "".join(_SENSOR.format(sid=s, az=az, lens=lens) for s, az in (("camA", 30), ("camB", -40)))
+    sensors = "".join(sensor_xml(s, az, lens=lens) for s, az in (("camA", 30), ("camB", -40)))
     xml = particle_scene_xml(sensors, integrator='<integrator type="particle_tracer"><integer '
                                                'name="rays_per_particle" value="8"/></integrator>')
     path = tmp_path / "scene.xml"

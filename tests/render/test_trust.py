@@ -12,23 +12,8 @@ from mitpiv.render import scene as scenes
 from mitpiv.render.render import render_scene
 from mitpiv.render.scene import load_dict, load_scene
 
-from .helpers import particle_scene_xml
+from .helpers import particle_scene_xml, sensor_xml
 
-_SENSOR = """    <sensor type="distorted_pinhole" id="{sid}">
-        <float name="azimuth_deg" value="{az}"/>
-        <float name="elevation_deg" value="50"/>
-        <float name="distance_mm" value="600"/>
-        <float name="focal_length_mm" value="85"/>
-        <float name="pixel_pitch_um" value="20"/>
-        {lens}
-        <film type="hdrfilm">
-            <integer name="width" value="{res}"/>
-            <integer name="height" value="{res}"/>
-            <string name="pixel_format" value="luminance"/>
-            <rfilter type="{rfilter}"/>
-        </film>
-    </sensor>
-"""
 THIN_LENS = '<float name="f_number" value="2"/><float name="focus_distance_mm" value="560"/>'
 
 
@@ -38,7 +23,7 @@ def _xml(tmp_path, cams, *, n=60, res=32, lens=THIN_LENS, rfilter="box", rays=8,
     for k in (0, 1):
         write_particles_ply(tmp_path / f"particles_{k}.ply", pts if same_frames else rng.uniform(-1.5, 1.5, (n, 3)),
                             1.5, proxy_radius_mm=0.01)
-    sensors = "".join(_SENSOR.format(sid=s, az=az, lens=lens, res=res, rfilter=rfilter) for s, az in cams)
+    sensors = "".join(sensor_xml(s, az, lens=lens, res=res, rfilter=rfilter) for s, az in cams)
     xml = particle_scene_xml(sensors, integrator=f'<integrator type="particle_tracer"><integer '
                                                  f'name="rays_per_particle" value="{rays}"/></integrator>')
     path = tmp_path / "scene.xml"
