@@ -467,9 +467,8 @@ def stage_calibrate(ctx: StageContext) -> dict:
         except CalibrationError as e:
             raise CalibrationError(
                 f"experiment: [calibration] model = 'pinhole': camera {sid!r} ({int(vis.sum())} target points, "
-                f"noise_px = {c.noise_px}): {e} A narrow field of view (a long lens, a small crop) is nearly affine: "
-                f"with noisy points the linear start misplaces the principal point. Use model = 'true', a smaller "
-                f"noise_px or a larger crop.") from None
+                f"noise_px = {c.noise_px}): {e} Use model = 'true', a smaller noise_px or more target points "
+                f"([calibration] points).") from None
         fitted.append(mapping.camera)
         reports.append(mapping.fit_report)
     return _write_cameras(ctx.out, fitted, true, ids, reports)
