@@ -19,6 +19,8 @@ Experiment file (paths relative to it; ``mitpiv schema --kind tracking`` lists e
     [tracking]     bounds_mm, tolerance_px, search_px, ... (mitpiv.tracking.stb.stb)
     [evaluate]     radius_px, bin_mm
     [output]       vtk = true: ParaView files of the tracks in RUN/vtk
+    [compare]      openlpt = true, tomo = true, tomo_*: other methods on the same images (opt-in,
+                   mitpiv.studies.kinds.tracking_compare)
 
 Stages: ``field`` (seeding and advection, :func:`mitpiv.physics.sequence.advect_sequence`;
 one PLY per frame and the truth in the one truth format, with identities, velocities and
@@ -32,7 +34,9 @@ images), ``track`` (:func:`mitpiv.tracking.stb.stb`; a sequence shorter than fou
 reconstructed frame by frame with IPR and has no velocities), ``evaluate``
 (:func:`mitpiv.tracking.metrics.track_metrics` and :func:`~mitpiv.tracking.metrics.bin_tracks`),
 ``report`` (:func:`mitpiv.studies.report.tracking_report`) and ``vtk`` (with
-``[output] vtk = true``).
+``[output] vtk = true``). With ``[compare]``, ``openlpt`` and ``tomo`` run between evaluate
+and report (:mod:`mitpiv.studies.kinds.tracking_compare`: OpenLPT's STB and MART + 3-D PIV
+on the same frames and cameras, scored by :func:`score_tracks` and :func:`binned_error`).
 
 The calibration runs after the rendering (the scene's cameras do not depend on it), so a
 changed calibration setting does not render again.
