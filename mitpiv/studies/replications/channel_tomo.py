@@ -85,9 +85,11 @@ def scale(quick: bool) -> dict:
 
 #: single-core rates, measured on the 2-core machine under a load of ~4 (wall times divided by
 #: the load): SMART + rendering per million voxels and frame; NCC PIV per vector and pass for a
-#: 32-voxel window (scaling with the window's volume); one pose's calibration
+#: 32-voxel window (scaling with the window's volume; 0.012 before the NCC's compiled local
+#: energies and single-precision FFTs, 3.6-4.7x faster in bench/bench_speed.py --sections ncc);
+#: one pose's calibration
 SECONDS_PER_MVOXEL_FRAME = 8.0
-SECONDS_PER_VECTOR_32 = 0.012
+SECONDS_PER_VECTOR_32 = 0.003
 SECONDS_PER_CALIBRATION = 0.4
 
 
