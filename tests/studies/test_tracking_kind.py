@@ -225,7 +225,11 @@ def test_compare_schema_errors_name_the_key(overrides, words):
 def test_openlpt_and_tomo_on_the_same_images_and_the_study_table(tiny, tmp_path):
     """Issue 27 item 7 at tiny scale: OpenLPT's STB and MART + 3-D PIV on the tiny run's
     frames (render and calibrate reused), scored like mitpiv's STB; results.json has one row
-    per method with the study's columns, and a figure per metric."""
+    per method with the study's columns, and a figure per metric.
+
+    About 9 s once the Numba kernels of MART and piv3d are compiled (tests/reconstruct and
+    tests/analysis compile them earlier in a suite run); alone, 20-30 s more of compilation
+    (the tomo stage's warm-up), which no smaller tomo setting avoids."""
     import json
     import shutil
 

@@ -163,13 +163,13 @@ def stage_openlpt(ctx: StageContext) -> dict:
     settings, vox = openlpt_settings(cfg, run)
     folder = ctx.out / "export"
     distorted = any(not cam.distortion.is_zero for cam in cams)
-    t0 = time.perf_counter()
-    export_openlpt(folder, run_images(run)["files"], cams, lower_mm=lo, upper_mm=hi,
-                   frame_rate_hz=1.0 / cfg.flow.dt_s, voxel_mm=vox, settings=settings, threads=c.openlpt_threads,
-                   undistort=distorted, progress=ctx.progress)
-    export_s = time.perf_counter() - t0
-    info = {"export_s": export_s, "voxel_mm": vox, "undistorted": distorted}
-    try:
+    info = {"export_s": None, "voxel_mm": vox, "undistorted": distorted}
+    try:  # the export (a camera OpenLPT cannot represent) or the peer's run may fail
+        t0 = time.perf_counter()
+        export_openlpt(folder, run_images(run)["files"], cams, lower_mm=lo, upper_mm=hi,
+                       frame_rate_hz=1.0 / cfg.flow.dt_s, voxel_mm=vox, settings=settings, threads=c.openlpt_threads,
+                       undistort=distorted, progress=ctx.progress)
+        info["export_s"] = time.perf_counter() - t0
         tracks, wall = run_openlpt(folder, timeout_s=c.openlpt_timeout_s)
     except MitpivError as e:  # the peer's failure is a result: the row says why
         import warnings
