@@ -203,7 +203,7 @@ def run(ctx) -> ReplicationResult:
     cals = ctx.map(calibration_point, pts["cal"], key=_cal_key, desc="calibrations")
     cal = dict(zip(pts["cal"], cals, strict=True))
     items = []
-    for it in pts["piv"] + pts["q"]:  # PIV points first: the statistics rows are read there
+    for it in pts["q"] + pts["piv"]:  # Q-only points first: the theta-phi maps need no PIV and are cheap
         items.append({**it, "base_seed": ctx.seed,
                       "calibrations": [cal[(a, e, it["lv"], it["crop"])] for a, e in it["poses"]]})
     res = ctx.map(evaluation_point, items, key=lambda it: _key(it) + f"_b{it['base_seed']}", desc="points")
