@@ -46,7 +46,7 @@ def scale(quick: bool) -> dict:
     """The crops and settings of each scale (same code, same row ids)."""
     if quick:
         return {"lf_crop_mm": {"low": 1.2, "high": 0.6}, "lf_iterations": 5, "drt_rays_per_pixel": 4,
-                "rays_per_aperture_pixel": 4.0, "window_scale": 0.5, "tomo_crop_y_mm": 0.6, "tomo_iterations": 5,
+                "rays_per_aperture_pixel": 4.0, "window_scale": 1.0, "tomo_crop_y_mm": 0.6, "tomo_iterations": 5,
                 "convergence_random_rays": 1_000_000, "convergence_levels": (1.0, 4.0, 16.0)}
     return {"lf_crop_mm": {"low": 4.8, "high": 2.4}, "lf_iterations": 400, "drt_rays_per_pixel": 8,
             "rays_per_aperture_pixel": 256.0, "window_scale": 1.0, "tomo_crop_y_mm": 12.0, "tomo_iterations": 40,
@@ -93,8 +93,8 @@ SECONDS_PER_DRT_SAMPLE = 1.8e-7
 SECONDS_PER_DRT_UPDATE = 9e-8
 SECONDS_PER_SMART_VOXEL_CAMERA_ITER = 5.6e-8
 SECONDS_PER_VECTOR = 4e-3
-#: active DRT entries per sensor pixel and slab (measured: ~1.4 at 8 rays per pixel, 2 substeps)
-DRT_ACTIVE_PER_PIXEL_SLAB = 1.4
+#: active DRT entries per sensor pixel and slab (measured: 2.9 at 8 rays per pixel, 2 substeps, PMR 14 low)
+DRT_ACTIVE_PER_PIXEL_SLAB = 2.9
 
 
 def cost_estimate(quick: bool) -> dict:
