@@ -38,6 +38,7 @@ import math
 import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
+from mitpiv.physics.flows import Flow
 
 __all__ = ["NearFieldJet", "BROWN_ROSHKO_SPREADING", "MIXING_LAYER_RMS", "RMS_HALF_WIDTH"]
 
@@ -50,7 +51,7 @@ MIXING_LAYER_RMS = (0.18, 0.14, 0.15)
 RMS_HALF_WIDTH = 0.5
 
 
-class NearFieldJet:
+class NearFieldJet(Flow):
     """Round jet of diameter ``diameter_mm`` and exit speed ``exit_velocity_mm_s`` issuing
     from ``nozzle_mm`` along ``axis`` (unit), near field (``x/D`` about 0.5-3). Callable:
     ``jet.velocity(p_mm (N, 3), t_s) -> (N, 3) mm/s``. ``modes`` Fourier modes, ``seed``
@@ -92,13 +93,13 @@ class NearFieldJet:
         l11_per_le = 0.75 * math.pi * np.trapezoid(ee, np.log(kk)) / np.trapezoid(ee * kk, np.log(kk))
         self.reference_x_mm = float(self.diameter_mm if reference_x_mm is None else
                                     check_positive("reference_x_mm", reference_x_mm, owner="NearFieldJet", unit="mm"))
-        #: the spectrum's scale L_e [mm], frozen at the reference station
-        self.length_scale_mm = self.integral_scale_over_delta * self.spreading * self.reference_x_mm / l11_per_le
+        self._length_scale_mm = self.integral_scale_over_delta * self.spreading * self.reference_x_mm / l11_per_le
         d = rng.normal(size=(self.modes, 3))
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         s = np.cross(d, rng.normal(size=(self.modes, 3)))
         s /= np.linalg.norm(s, axis=1, keepdims=True)
         self._khat, self._kmag_le = d, km
+        self._l11_per_le = float(l11_per_le)
         self._amp = np.sqrt(c2)[:, None] * s  # amplitude of curl(psi) for each mode, perpendicular to k
         self._phase = rng.uniform(0.0, 2 * math.pi, self.modes)
         e1 = np.cross(self.axis, [0.0, 0.0, 1.0] if abs(self.axis[2]) < 0.9 else [1.0, 0.0, 0.0])
@@ -106,6 +107,11 @@ class NearFieldJet:
         self._e2 = np.cross(self.axis, self._e1)
 
     # ------------------------------------------------------------------ geometry
+    @property
+    def length_scale_mm(self) -> float:
+        """The spectrum's scale L_e [mm] (von Karman), frozen at ``reference_x_mm``."""
+        return self._length_scale_mm
+
     @property
     def radius_mm(self) -> float:
         return 0.5 * self.diameter_mm
@@ -197,8 +203,6 @@ class NearFieldJet:
         """Mean + fluctuation (N, 3) [mm/s] (frozen: ``t_s`` is ignored)."""
         p = np.asarray(p_mm, dtype=float).reshape(-1, 3)
         return self.mean_velocity(p) + self.fluctuation(p)
-
-    __call__ = velocity
 
     def box_average(self, p_mm, window_mm, nodes: int = 4) -> np.ndarray:
         """Velocity averaged over boxes ``window_mm`` (w_x, w_y, w_z) [mm] along the world axes

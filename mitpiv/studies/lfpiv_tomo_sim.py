@@ -67,6 +67,7 @@ import numpy as np
 
 from mitpiv.errors import ConfigError
 from mitpiv.grid import VoxelGrid
+from mitpiv.physics.plenoptic import ltpr
 
 log = logging.getLogger(__name__)
 
@@ -100,26 +101,6 @@ PAPER_TABLE_2 = {
     ("lf", 28): ((320, 320, 64), (160, 160, 32)),
     ("tomo", 0.05): ((64, 64, 64), (32, 32, 32)), ("tomo", 0.1): ((32, 32, 32), (16, 16, 16)),
 }
-
-
-def ltpr(lf_resolution_px, tomo_resolution_px, n_cameras: int) -> float:
-    """Light-field-to-tomographic pixel ratio (the paper's section 2)::
-
-        LTPR = (p_x p_y)_LF-PIV / (p_x p_y N_c)_Tomo-PIV
-
-    Parameters
-    ----------
-    lf_resolution_px : (p_x, p_y) of the light-field camera [px]
-    tomo_resolution_px : (p_x, p_y) of each tomographic camera [px]
-    n_cameras : N_c, the tomographic cameras (>= 1)
-    """
-    lf = np.broadcast_to(np.asarray(lf_resolution_px, dtype=float), (2,))
-    tomo = np.broadcast_to(np.asarray(tomo_resolution_px, dtype=float), (2,))
-    if not (np.all(lf > 0) and np.all(tomo > 0)):
-        raise ConfigError(f"ltpr: resolutions must be positive, got {lf.tolist()} and {tomo.tolist()} px.")
-    if isinstance(n_cameras, bool) or int(n_cameras) != n_cameras or n_cameras < 1:
-        raise ConfigError(f"ltpr: 'n_cameras' must be an integer >= 1, got {n_cameras!r}.")
-    return float(lf[0] * lf[1] / (tomo[0] * tomo[1] * int(n_cameras)))
 
 
 def jet(seed: int = 0, modes: int = 400):

@@ -195,3 +195,16 @@ def test_jet_box_average_of_the_mean_flow():
     g = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3) * w
     ref = np.array([jet.velocity(q + g).mean(axis=0) for q in p])
     assert jet.box_average(p, w, nodes=4) == pytest.approx(ref, rel=2e-3, abs=1e-3)
+
+
+def test_jet_rebuilds_from_its_dict_and_ltpr_is_in_the_physics_layer():
+    from mitpiv.physics.plenoptic import ltpr
+
+    assert ltpr is S.ltpr
+    jet = NearFieldJet(40.0, 62.5, nozzle_mm=(-40.0, -20.0, 0.0), modes=64, seed=5)
+    d = jet.to_dict()
+    assert d.pop("kind") == "near_field_jet"
+    p = np.array([[0.0, 0.0, 0.0], [2.0, -3.0, 1.0]])
+    assert NearFieldJet(**d)(p) == pytest.approx(jet(p), rel=1e-12)
+    with pytest.raises(ConfigError):
+        jet(np.array([[-50.0, 0.0, 0.0]]))  # upstream of the nozzle
