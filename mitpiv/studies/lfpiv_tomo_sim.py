@@ -73,7 +73,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["ltpr", "VOLUME_MM", "LF_CAMERAS", "TOMO", "LFCase", "TomoCase", "lf_camera", "tomo_cameras", "jet",
            "render_light_field", "render_tomo", "seed_particles", "particle_errors", "piv_errors", "lf_point",
-           "tomo_point", "PAPER_TABLE_2", "window_plan"]
+           "tomo_point", "PAPER_TABLE_2", "window_plan", "ideal_piv_errors"]
 
 VOLUME_MM = (12.0, 12.0, 10.0)
 D_MM = 40.0
@@ -408,8 +408,19 @@ def lf_point(case: LFCase, *, iterations: int, rays_per_aperture_pixel: float, d
            "pixels": case.sensor_px**2, "full_pixels": case.spec["resolution"] ** 2}
     out["particles_err"] = particle_errors(vols[0], grid, p0)
     out["piv"] = piv_errors(vols[0], vols[1], grid, fl, dt, passes)
+    out["piv_ideal"] = ideal_piv_errors(p0, p1, grid, fl, dt, passes, sigma_voxels=1.0)
     out["wall_s"] = time.perf_counter() - t0
     return out
+
+
+def ideal_piv_errors(p0, p1, grid: VoxelGrid, flow, dt_s: float, passes, *, sigma_voxels: float) -> dict:
+    """:func:`piv_errors` on the ideal reconstructions (Gaussian blobs of ``sigma_voxels`` at
+    the true particle positions): the error of the PIV and the finite windows alone, without
+    the reconstruction's (a diagnostic the paper does not show)."""
+    from mitpiv.analysis.quality import truth_volume
+
+    return piv_errors(truth_volume(p0, grid, sigma_voxels), truth_volume(p1, grid, sigma_voxels), grid, flow, dt_s,
+                      passes)
 
 
 def tomo_point(case: TomoCase, *, iterations: int, window_scale: float, seed: int, flow_seed: int = 0) -> dict:
@@ -445,5 +456,6 @@ def tomo_point(case: TomoCase, *, iterations: int, window_scale: float, seed: in
            "voxels": int(np.prod(grid.shape)), "full_voxels": TOMO["resolution"] ** 2 * TOMO["nz"]}
     out["particles_err"] = particle_errors(vols[0], grid, p0)
     out["piv"] = piv_errors(vols[0], vols[1], grid, fl, dt, passes)
+    out["piv_ideal"] = ideal_piv_errors(p0, p1, grid, fl, dt, passes, sigma_voxels=TOMO["particle_diameter_px"] / 4)
     out["wall_s"] = time.perf_counter() - t0
     return out
