@@ -46,7 +46,7 @@ def scale(quick: bool) -> dict:
     """The crops and settings of each scale (same code, same row ids)."""
     if quick:
         return {"lf_crop_mm": {"low": 1.2, "high": 0.6}, "lf_iterations": 5, "drt_rays_per_pixel": 4,
-                "rays_per_aperture_pixel": 4.0, "window_scale": 1.0, "tomo_crop_y_mm": 0.6, "tomo_iterations": 5,
+                "rays_per_aperture_pixel": 4.0, "window_scale": 1.0, "tomo_crop_y_mm": 0.3, "tomo_iterations": 5,
                 "convergence_random_rays": 400_000, "convergence_levels": (1.0, 4.0, 16.0)}
     return {"lf_crop_mm": {"low": 4.8, "high": 2.4}, "lf_iterations": 400, "drt_rays_per_pixel": 8,
             "rays_per_aperture_pixel": 256.0, "window_scale": 1.0, "tomo_crop_y_mm": 12.0, "tomo_iterations": 40,
