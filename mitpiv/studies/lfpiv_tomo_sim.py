@@ -128,11 +128,13 @@ def window_plan(kind: str, key, *, fit_shape_zyx=None, scale: float = 1.0):
 # ---------------------------------------------------------------------- cases
 @dataclass(frozen=True)
 class LFCase:
-    """A light-field case: camera ("low"/"high"), PMR, the lateral crop [mm]."""
+    """A light-field case: camera ("low"/"high"), PMR, the crop [mm]: ``crop_mm`` wide along x
+    (the jet axis) and ``crop_y_mm`` along y (default ``crop_mm``: a central square), full depth."""
 
     camera: str
     pmr: int
     crop_mm: float
+    crop_y_mm: float | None = None
 
     @property
     def spec(self) -> dict:
@@ -147,16 +149,23 @@ class LFCase:
         return self.spec["mla"][self.pmr]
 
     @property
-    def frac(self) -> float:
-        return self.crop_mm / VOLUME_MM[0]
+    def fracs(self) -> tuple[float, float]:
+        cy = self.crop_mm if self.crop_y_mm is None else self.crop_y_mm
+        return self.crop_mm / VOLUME_MM[0], cy / VOLUME_MM[1]
 
     @property
-    def sensor_px(self) -> int:
-        return int(round(self.spec["resolution"] * self.frac))
+    def sensor_wh(self) -> tuple[int, int]:
+        """Sensor crop (W, H) [px]."""
+        return tuple(int(round(self.spec["resolution"] * f)) for f in self.fracs)
+
+    @property
+    def pixels(self) -> int:
+        w, h = self.sensor_wh
+        return w * h
 
     @property
     def mla_count(self) -> tuple[int, int]:
-        return tuple(max(2, int(round(n * self.frac))) for n in self.mla_full)
+        return tuple(max(2, int(round(n * f))) for n, f in zip(self.mla_full, self.fracs, strict=True))
 
     @property
     def voxel_mm(self) -> tuple[float, float, float]:
@@ -165,9 +174,11 @@ class LFCase:
 
     def grid(self) -> VoxelGrid:
         vx, vy, vz = self.voxel_mm
-        n = int(round(self.crop_mm / vx))
+        fx, fy = self.fracs
+        nx, ny = int(round(fx * VOLUME_MM[0] / vx)), int(round(fy * VOLUME_MM[1] / vy))
         nz = self.spec["nz"]
-        return VoxelGrid(origin_mm=(-n * vx / 2, -n * vy / 2, -nz * vz / 2), voxel_mm=(vx, vy, vz), shape=(nz, n, n))
+        return VoxelGrid(origin_mm=(-nx * vx / 2, -ny * vy / 2, -nz * vz / 2), voxel_mm=(vx, vy, vz),
+                         shape=(nz, ny, nx))
 
     def n_particles(self) -> int:
         return int(round(PPM * self.mla_count[0] * self.mla_count[1]))
@@ -210,8 +221,7 @@ def lf_camera(case: LFCase):
     so = si / LF_MAGNIFICATION
     m = np.eye(4)
     m[2, 3] = -so  # main lens on the -z axis, looking along +z at the volume centre
-    n = case.sensor_px
-    return PlenopticCamera(resolution=(n, n), pixel_pitch_um=case.spec["pixel_um"], focal_length_mm=LF_MAIN_FOCAL_MM,
+    return PlenopticCamera(resolution=case.sensor_wh, pixel_pitch_um=case.spec["pixel_um"], focal_length_mm=LF_MAIN_FOCAL_MM,
                            aperture_diameter_mm=si / LF_IMAGE_F_NUMBER, focus_distance_mm=so,
                            mla_pitch_um=case.pmr * case.spec["pixel_um"], mla_layout="hex",
                            mla_count=case.mla_count, to_world_mitsuba=m)
@@ -397,15 +407,15 @@ def lf_point(case: LFCase, *, iterations: int, rays_per_aperture_pixel: float, d
     # per frame: the weights (built once per camera and grid) and the faster frame's iterations
     # (the first call may include Numba's compilation)
     per_frame = weights_s + min(i["iterate_s"] for i in infos)
-    out = {"kind": "lf", "camera": case.camera, "pmr": case.pmr, "crop_mm": case.crop_mm,
-           "sensor_px": case.sensor_px, "mla_count": list(case.mla_count), "particles": len(p0),
+    out = {"kind": "lf", "camera": case.camera, "pmr": case.pmr, "crop_mm": case.crop_mm, "crop_y_mm": case.crop_y_mm,
+           "sensor_px": list(case.sensor_wh), "mla_count": list(case.mla_count), "particles": len(p0),
            "grid": list(grid.shape), "voxel_mm": list(grid.voxel_mm), "dt_s": dt,
            "rays_per_particle": rays_per_particle(cam, rays_per_aperture_pixel),
            "lit_fraction": float(np.mean(imgs[0] > 0)), "render_s": render_s, "weights_s": weights_s,
            "reconstruct_s": rec_s, "reconstruct_s_per_frame": per_frame, "weight_entries": int(a.nnz),
            "active_entries": int(np.mean([i["active_entries"] for i in infos])),
            "active_voxels": int(np.mean([i["active_voxels"] for i in infos])), "iterations": iterations,
-           "pixels": case.sensor_px**2, "full_pixels": case.spec["resolution"] ** 2}
+           "pixels": case.pixels, "full_pixels": case.spec["resolution"] ** 2}
     out["particles_err"] = particle_errors(vols[0], grid, p0)
     out["piv"] = piv_errors(vols[0], vols[1], grid, fl, dt, passes)
     out["piv_ideal"] = ideal_piv_errors(p0, p1, grid, fl, dt, passes, sigma_voxels=1.0)
