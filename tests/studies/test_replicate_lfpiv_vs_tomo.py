@@ -208,3 +208,16 @@ def test_jet_rebuilds_from_its_dict_and_ltpr_is_in_the_physics_layer():
     assert NearFieldJet(**d)(p) == pytest.approx(jet(p), rel=1e-12)
     with pytest.raises(ConfigError):
         jet(np.array([[-50.0, 0.0, 0.0]]))  # upstream of the nozzle
+
+
+def test_light_field_crop_keeps_the_optics_and_the_densities():
+    full = S.LFCase("low", 14, 12.0)
+    strip = S.LFCase("low", 14, 4.8, 12.0)
+    assert strip.sensor_wh == (320, 800) and strip.grid().shape == (67, 400, 160)
+    assert strip.mla_count == (23, 66)  # lenslets of the crop, the table's 57 x 66 cut to 40 % along x
+    a, b = S.lf_camera(full), S.lf_camera(strip)
+    for name in ("pixel_pitch_um", "mla_pitch_um", "mla_focal_length_um", "focal_length_mm", "aperture_diameter_mm",
+                 "focus_distance_mm", "mla_gap_um"):
+        assert getattr(a, name) == getattr(b, name), name
+    # the same particles per microlens, hence per volume
+    assert strip.n_particles() / (strip.mla_count[0] * strip.mla_count[1]) == pytest.approx(0.5, abs=0.01)

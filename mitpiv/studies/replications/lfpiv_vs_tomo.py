@@ -97,21 +97,22 @@ def case_point(it: dict) -> dict:
                         window_scale=it["ws"], seed=1000 * it["seed"] + 11 * it["nc"] + int(100 * it["ppp"]))
 
 
-#: measured single-core rates (this session, 2-core machine under a load of ~4): DRT weights
-#: per traced ray-slab sample, DRT-MART per active weight entry and iteration, SMART per voxel,
-#: camera and iteration, PIV + truth per vector (incl. the 27-point box average; twice: the
-#: reconstructions and the ideal volumes)
-SECONDS_PER_DRT_SAMPLE = 1.8e-7
-SECONDS_PER_DRT_UPDATE = 9e-8
-SECONDS_PER_SMART_VOXEL_CAMERA_ITER = 5.6e-8
-SECONDS_PER_VECTOR = 8e-3
-#: active DRT entries per sensor pixel and slab (measured: 2.9 at 8 rays per pixel, 2 substeps, PMR 14 low)
-DRT_ACTIVE_PER_PIXEL_SLAB = 2.9
+#: measured single-core rates (this session, 2-core machine under a load of ~8, nice): DRT
+#: weights per traced ray-slab sample (34 s for 1.1e8 samples: LF low PMR 14, 4.8 mm square),
+#: DRT-MART per active weight entry and iteration (33 s for 50 x 2.7e7), SMART per voxel, camera
+#: and iteration (28 s per frame: 4 cameras, 1.36e6 voxels, 40 iterations), PIV + truth per
+#: vector and window voxel (19 s for 3.7e7 and 13 s for 6.2e7)
+SECONDS_PER_DRT_SAMPLE = 3.1e-7
+SECONDS_PER_DRT_UPDATE = 2.5e-8
+SECONDS_PER_SMART_VOXEL_CAMERA_ITER = 1.3e-7
+SECONDS_PER_WINDOW_VOXEL = 4e-7
+#: active DRT entries per sensor pixel and slab (measured: 3.9 at 8 rays per pixel, 2 substeps, PMR 14 low)
+DRT_ACTIVE_PER_PIXEL_SLAB = 3.9
 
 
 def cost_estimate(quick: bool) -> dict:
     """Estimated single-core seconds of a scale from the measured rates (light-field cases,
-    tomographic cases) and the number of points."""
+    tomographic cases; each with its PIV on the reconstructions and on the ideal volumes)."""
     from mitpiv.studies import lfpiv_tomo_sim as S
 
     sc = scale(quick)
@@ -124,24 +125,26 @@ def cost_estimate(quick: bool) -> dict:
             weights = px * sc["drt_rays_per_pixel"] * 2 * nz * SECONDS_PER_DRT_SAMPLE
             mart = 2 * px * nz * DRT_ACTIVE_PER_PIXEL_SLAB * sc["lf_iterations"] * SECONDS_PER_DRT_UPDATE
             passes = S.window_plan("lf", pmr, fit_shape_zyx=c.grid().shape, scale=sc["window_scale"])
-            lf_s += weights + mart + _vectors(c.grid().shape, passes) * SECONDS_PER_VECTOR
+            lf_s += weights + mart + 2 * _window_voxels(c.grid().shape, passes) * SECONDS_PER_WINDOW_VOXEL
     for nc in NCS:
         for ppp in PPPS:
             c = S.TomoCase(nc, ppp, sc["tomo_crop_y_mm"])
             vox = int(np.prod(c.grid().shape))
             passes = S.window_plan("tomo", ppp, fit_shape_zyx=c.grid().shape, scale=sc["window_scale"])
             tomo_s += 2 * vox * nc * sc["tomo_iterations"] * SECONDS_PER_SMART_VOXEL_CAMERA_ITER \
-                + _vectors(c.grid().shape, passes) * SECONDS_PER_VECTOR
+                + 2 * _window_voxels(c.grid().shape, passes) * SECONDS_PER_WINDOW_VOXEL
     return {"points": len(CAMERAS) * len(PMRS) + len(NCS) * len(PPPS), "lf_s": lf_s, "tomo_s": tomo_s,
             "cpu_s": lf_s + tomo_s}
 
 
-def _vectors(shape_zyx, passes) -> float:
+def _window_voxels(shape_zyx, passes) -> float:
+    """Sum over the passes of vectors x window voxels (75 % overlap)."""
     n = 0.0
     for w in passes:
         step = [max(1, int(round(0.25 * v))) for v in w]
-        n += np.prod([max(1, (s - ww) // st + 1) for s, ww, st in zip(shape_zyx[::-1], w, step, strict=True)])
-    return float(n)
+        vec = np.prod([max(1, (s - ww) // st + 1) for s, ww, st in zip(shape_zyx[::-1], w, step, strict=True)])
+        n += float(vec) * float(np.prod(w))
+    return n
 
 
 def convergence(sc: dict, seed: int) -> dict:
