@@ -108,8 +108,18 @@ def _check_choice(what, name, value, choices):
         raise ConfigError(f"{what}: '{name}' must be one of {choices}, got {value!r}.")
 
 
-def preprocess_images(images, *, k: float = 2.0) -> list[np.ndarray]:
-    """Histogram-based thresholding: subtract each image's background + ``k`` noise sigmas.
+def preprocess_images(images, *, k: float | None = 2.0, smooth_px: float = 0.0) -> list[np.ndarray]:
+    """Optional Gaussian smoothing, then histogram-based thresholding: subtract each image's
+    background + ``k`` noise sigmas.
+
+    ``smooth_px`` > 0 first convolves each image with a Gaussian of that sigma [px]
+    (scipy.ndimage.gaussian_filter, reflecting edges), as tomographic PIV practice does before
+    MART (e.g. a 3 x 3 Gaussian). It matters for noisy images clipped at 0 by the ADC: MART's
+    multiplicative update zeroes every voxel that sees a zero pixel, so noise that clips a
+    particle image's wings to 0 strips the particle to its brightest voxel (the channel-tomo
+    replication: 8-bit images, noise 10 % of the peak, particle images 2 px across, 1,483
+    active voxels for 3,974 particles and Q 0.32; smoothed with sigma 0.7 px: 118,649 active
+    voxels, Q 0.44, and the PIV error falls from 0.9-1.3 to 0.07-0.12 voxel).
 
     The background level is the mode of the image histogram (mean of the fullest of 1024
     bins up to the 99.5th percentile), the noise sigma the root-mean-square deviation below the mode (the lower
@@ -131,19 +141,31 @@ def preprocess_images(images, *, k: float = 2.0) -> list[np.ndarray]:
     Parameters
     ----------
     images : sequence of (H, W) arrays
-    k : float >= 0
+    k : float >= 0, or None (smoothing only, no threshold)
+    smooth_px : float >= 0
+        Gaussian sigma [px] of the smoothing before the threshold (0: none).
 
     Returns
     -------
     list of float64 images
     """
-    if not (np.isfinite(k) and k >= 0):
-        raise ConfigError(f"preprocess_images: 'k' must be finite and >= 0, got {k!r}.")
+    if k is not None and not (np.isfinite(k) and k >= 0):
+        raise ConfigError(f"preprocess_images: 'k' must be finite and >= 0 (or None for no threshold), got {k!r}.")
+    if not (np.isfinite(smooth_px) and 0 <= smooth_px <= 10):
+        raise ConfigError(f"preprocess_images: 'smooth_px' must be a Gaussian sigma in [0, 10] px, got {smooth_px!r}; "
+                          f"0 turns the smoothing off.")
     out = []
     for i, im in enumerate([images] if isinstance(images, np.ndarray) and images.ndim == 2 else images):
         a = np.asarray(im, dtype=np.float64)
         if a.ndim != 2 or not np.all(np.isfinite(a)):
             raise ConfigError(f"preprocess_images: images[{i}] must be a finite 2D image, got shape {a.shape}.")
+        if smooth_px > 0:
+            from scipy import ndimage
+
+            a = ndimage.gaussian_filter(a, float(smooth_px), mode="reflect")
+        if k is None:
+            out.append(a)
+            continue
         lo, hi = float(a.min()), float(np.percentile(a, 99.5))
         if hi <= lo:
             out.append(np.maximum(a - lo, 0.0) if lo > 0 else a.copy())
@@ -568,8 +590,9 @@ RESIDUALS = ("each", "final")
 
 def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 1.0, smart: bool = False,
          init="mlos", weights: str = "circle", psf_sigma_px: float = 0.5, interpolation: str = "linear",
-         prune: bool = True, preprocess: float | None = None, chunk: int = 1_000_000, progress: Progress = None,
-         return_info: bool = False, cache: WeightCache | None = None, residuals: str = "each"):
+         prune: bool = True, preprocess: float | None = None, smooth_px: float = 0.0, chunk: int = 1_000_000,
+         progress: Progress = None, return_info: bool = False, cache: WeightCache | None = None,
+         residuals: str = "each"):
     """MART or SMART reconstruction on sparse voxel-pixel weights.
 
     MART (``smart=False``; Elsinga et al. 2006): for every pixel ``i`` of every camera in
@@ -608,6 +631,10 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
     preprocess : float or None
         When given, the images are first thresholded by :func:`preprocess_images` with this
         ``k``.
+    smooth_px : float >= 0
+        Gaussian smoothing of the images [px] before the threshold (:func:`preprocess_images`);
+        0 (default) leaves them as they are. Use it for noisy images clipped at 0, whose zero
+        pixels inside particle images would otherwise zero the particles' voxels.
     chunk : int
         Voxels per batch when computing weight footprints on the generic path (bounds
         temporary memory).
@@ -643,8 +670,8 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
         init_vol = grid.check_volume(init, "init").astype(np.float64)
         if not np.all(np.isfinite(init_vol)) or np.any(init_vol < 0):
             raise ConfigError(f"{what}: 'init' must be finite and >= 0.")
-    if preprocess is not None:
-        imgs = preprocess_images(imgs, k=preprocess)
+    if preprocess is not None or smooth_px:
+        imgs = preprocess_images(imgs, k=preprocess, smooth_px=smooth_px)
     _check_coverage(maps, imgs, grid, what)
     _warn_dark(imgs, what)
     t0 = time.perf_counter()

@@ -107,6 +107,10 @@ class ChannelTomoSystem:
     full_scale: int = 255
     iterations: int = 5
     preprocess_k: float = 0.0
+    #: Gaussian smoothing of the 8-bit images before the threshold [px] (not in the paper; see
+    #: :func:`mitpiv.reconstruct.preprocess_images`): without it the ADC-clipped noise zeroes
+    #: the particles' voxels in SMART and the PIV between two reconstructions fails at l_v+ 0.94
+    image_smoothing_px: float = 0.7
     target_lattice: int = 9
     target_depths_plus: tuple = (-50.0, -25.0, 0.0, 25.0, 50.0)
     target_dot_sigma_px: float = 0.8
@@ -337,7 +341,8 @@ def _reconstruct(system, maps, cams, factors, pts, table, grid, sigma, rng):
     clean = render_particles(cams, factors, pts, table, system.peak_counts)
     imgs = [to_8bit(c, sigma, rng, system.full_scale) for c in clean]
     vol, info = mart(imgs, maps, grid, iterations=system.iterations, smart=True, interpolation="cubic",
-                     preprocess=system.preprocess_k, return_info=True, residuals="final")
+                     preprocess=system.preprocess_k, smooth_px=system.image_smoothing_px, return_info=True,
+                     residuals="final")
     return vol, info
 
 
