@@ -7,4 +7,5 @@ MODULES: dict[str, str] = {
     "sapiv-distortion": "mitpiv.studies.replications.sapiv_distortion",
     "channel-tomo": "mitpiv.studies.replications.channel_tomo",
     "multi-plenoptic": "mitpiv.studies.replications.multi_plenoptic",
+    "drop-fragments": "mitpiv.studies.replications.drop_fragments",
 }

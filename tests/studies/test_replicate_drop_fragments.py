@@ -1,0 +1,32 @@
+"""The plenoptic vs DIH drop-fragment replication (skeleton): its quick run (schema,
+required ids, sane values against the simulated truth). The paper's equations are tested
+in tests/analysis/test_drop_fragments.py and tests/physics/test_drop_impact.py."""
+
+import math
+
+from mitpiv.studies.replication import RESULTS_KEYS, replicate
+from mitpiv.studies.replications.drop_fragments import STUDY
+
+# The pellets are 2.0 mm spheres; the plenoptic sizing of the paper's camera at |M| = 0.28
+# (one refocused pixel ~0.14 mm) should land within a pixel or so of it.
+PELLET_D_ATOL_MM = 0.3
+
+
+def test_quick_run_schema_and_ids(tmp_path):
+    res = replicate("drop-fragments", tmp_path, quick=True)
+    assert set(RESULTS_KEYS) <= set(res)
+    assert res["scale"] == "quick" and res["study"] == "drop-fragments"
+    ids = [r["id"] for r in res["rows"]]
+    assert len(ids) == len(set(ids))
+    assert set(STUDY.required_ids) <= set(ids)
+    rows = {r["id"]: r for r in res["rows"]}
+    for r in res["rows"]:
+        assert {"id", "quantity", "paper_source", "paper", "ours", "tolerance", "agrees", "note"} <= set(r)
+    assert rows["n_found_plenoptic_we784_tau5.1"]["ours"] >= 1
+    assert rows["n_found_dih_we784_tau5.1"]["ours"] >= 1
+    assert abs(rows["pellet_mean_d_mm"]["ours"] - 2.0) < PELLET_D_ATOL_MM
+    for k in ("model_err_x_mm_we784_tau5.1", "model_err_z_mm_we784_tau5.1"):
+        assert rows[k]["ours"] is None or (math.isfinite(rows[k]["ours"]) and rows[k]["ours"] >= 0)
+    c = res["curves"]["mean_d_over_d0_we784"]
+    assert c["x"] == [2.6, 5.1, 7.7] and len(c["y"]["plenoptic"]) == 3
+    assert (tmp_path / "report.md").is_file()
