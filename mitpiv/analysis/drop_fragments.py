@@ -41,6 +41,7 @@ import numpy as np
 from mitpiv.errors import ConfigError
 
 __all__ = ["PAPER_DOT_CARD", "StackDewarp", "fit_stack_dewarp", "dot_card_points", "dot_card_observations",
+           "locate_dots_in_stack",
            "paper_alphas", "PAPER_ALPHA_RANGES", "model_error", "z_uncertainty", "power_law_fit",
            "dih_depth_resolution"]
 
@@ -171,6 +172,76 @@ def dot_card_observations(camera, points_mm, *, coords: str = "alpha") -> np.nda
         return np.concatenate([cen, alpha[..., None]], axis=-1)
     z_obj = f * s / (s - f)  # thin lens: the object distance imaged at s
     return np.concatenate([-cen * (z_obj / s)[..., None], (z_obj - so)[..., None]], axis=-1)
+
+
+def locate_dots_in_stack(stack, z_mm, *, threshold: float | None = None, grow_px: int = 2,
+                         min_area_px: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Bright dots of a dot card in its focal stack: in-plane centre and depth of each.
+
+    The maximum-intensity map over the stack (read plane by plane) is segmented (above
+    ``threshold`` over its median; default half-way to its maximum), each blob grown by
+    ``grow_px``; blobs touching the border or under ``min_area_px`` are dropped. In every
+    plane each blob's sharpness is the sum of the Tenengrad (squared Sobel gradient) over
+    it; the depth is the plane of the largest sharpness, refined by a 3-point Gaussian; the
+    centre the background-subtracted intensity centroid over the blob in that plane (the
+    sharpest and its two neighbours, interpolated like the depth). Vectorised over dots.
+
+    Parameters
+    ----------
+    stack : (n_z, H, W) array (may be memory-mapped)
+    z_mm : (n_z,) monotonic depths of the planes
+
+    Returns
+    -------
+    uv (N, 2) stack-pixel centres (column, row; pixel centres at integers), z (N,) [mm].
+    """
+    from scipy import ndimage
+
+    from mitpiv.analysis.backlit import tenengrad
+    from mitpiv.analysis.particles import gauss3_offset
+
+    z = np.asarray(z_mm, dtype=np.float64).reshape(-1)
+    if stack.ndim != 3 or stack.shape[0] != z.size or z.size < 3:
+        raise ConfigError(f"locate_dots_in_stack: stack must be (n_z >= 3, H, W) with one depth per plane; got "
+                          f"{stack.shape} and {z.size} depths.")
+    mx = np.asarray(stack[0], dtype=np.float64).copy()
+    for k in range(1, z.size):
+        np.maximum(mx, np.asarray(stack[k], dtype=np.float64), out=mx)
+    base = float(np.median(mx))
+    thr = 0.5 * (float(mx.max()) - base) if threshold is None else float(threshold)
+    lab, n = ndimage.label(mx - base > thr)
+    if grow_px > 0 and n:
+        grown = ndimage.grey_dilation(lab, size=(2 * grow_px + 1,) * 2)
+        lab = np.where(lab > 0, lab, grown)
+    if n == 0:
+        return np.zeros((0, 2)), np.zeros(0)
+    ids = np.arange(1, n + 1)
+    edge = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
+    area = ndimage.sum_labels(np.ones_like(mx), lab, ids)
+    ids = ids[(area >= min_area_px) & ~np.isin(ids, edge)]
+    if ids.size == 0:
+        return np.zeros((0, 2)), np.zeros(0)
+    rows, cols = np.indices(mx.shape, dtype=np.float64)
+    sharp, w, wu, wv = (np.empty((z.size, ids.size)) for _ in range(4))
+    for k in range(z.size):
+        img = np.asarray(stack[k], dtype=np.float64)
+        sharp[k] = ndimage.sum_labels(tenengrad(img), lab, ids)
+        sig = np.clip(img - base, 0.0, None)
+        w[k] = ndimage.sum_labels(sig, lab, ids)
+        wu[k] = ndimage.sum_labels(sig * cols, lab, ids)
+        wv[k] = ndimage.sum_labels(sig * rows, lab, ids)
+    k = np.argmax(sharp, axis=0)
+    r = np.arange(ids.size)
+    kc = np.clip(k, 1, z.size - 2)
+    off = np.where(k == kc, gauss3_offset(sharp[kc - 1, r], sharp[kc, r], sharp[kc + 1, r]), 0.0)
+    zi = k + off
+    # centre: interpolate the centroid linearly between the planes around the refined depth
+    k0 = np.clip(np.floor(zi).astype(int), 0, z.size - 2)
+    f = zi - k0
+    cu0, cv0 = wu[k0, r] / np.maximum(w[k0, r], 1e-300), wv[k0, r] / np.maximum(w[k0, r], 1e-300)
+    cu1, cv1 = wu[k0 + 1, r] / np.maximum(w[k0 + 1, r], 1e-300), wv[k0 + 1, r] / np.maximum(w[k0 + 1, r], 1e-300)
+    uv = np.column_stack([cu0 + f * (cu1 - cu0), cv0 + f * (cv1 - cv0)])
+    return uv, np.interp(zi, np.arange(z.size), z)
 
 
 def paper_alphas(case: str = "drop_impact", n: int = 1000, *, alpha_range=None) -> np.ndarray:
