@@ -34,8 +34,15 @@ from mitpiv.studies.replication import Curve, ReplicationResult, Row, Study, com
 DT_DROP_S = 150e-6  # "two short light pulses ... 150 us apart"
 DT_PELLET_S = 5e-6  # "an interframe time of 5 us"
 K1_MAIN_LENS = 0.3  # radial distortion of the 105 mm lens: not stated in the paper (see the report)
+SUPERSAMPLE = 2  # refocused grid 2x finer than the lenslets: "approximately 4 output image pixels per microlens"
 DIH_PIXEL_UM = 7.4  # "the DIH configuration (7.4 um per pixel)"
 DIH_WAVELENGTH_NM = 532.0  # not stated in the seed paper: a frequency-doubled Nd:YAG (assumed)
+#: Table 2 by (We, tau): (sd x, sd z, z uncertainty) [mm]; Table 1 gives the tau of each delay
+#: (600 mm: 233 / 235 / 237 ms -> tau 2.3 / 4.6 / 6.7, We 624; 900 mm: 318 / 320 / 322 ms ->
+#: 2.6 / 5.1 / 7.7, We 784; 1250 mm: 402 / 404 / 406 ms -> 3.0 / 6.0 / 9.0, We 1051).
+PAPER_TABLE_2 = {(624, 2.3): (0.275, 0.392, 0.116), (624, 4.6): (0.110, 0.341, 0.232), (624, 6.7): (0.070, 0.354, 0.285),
+                 (784, 2.6): (0.437, 0.445, 0.008), (784, 5.1): (0.263, 0.411, 0.148), (784, 7.7): (0.103, 0.373, 0.271),
+                 (1051, 3.0): (0.312, 0.393, 0.081), (1051, 6.0): (0.182, 0.365, 0.183), (1051, 9.0): (0.093, 0.347, 0.255)}
 PAPER = {"n_found_dih": 196, "n_found_plenoptic": 45, "model_err_x_mm": 0.263, "model_err_z_mm": 0.411,
          "pellet_z_sd_over_d": 0.74, "pellet_mean_d_mm": 2.1743, "mean_d_mm": 0.199}
 
@@ -48,13 +55,13 @@ def _scale(quick: bool) -> dict:
     from mitpiv.analysis.drop_fragments import PAPER_ALPHA_RANGES, PAPER_DOT_CARD
 
     if quick:
-        return {"crop_px": (420, 308), "planes": 41, "alpha_range": (0.9672, 1.0384), "spp": 4, "taus": (2.6, 5.1, 7.7),
+        return {"conditions": [(784, 2.6), (784, 5.1), (784, 7.7)], "crop_px": (420, 308), "planes": 41, "alpha_range": (0.9672, 1.0384), "spp": 4,
                 "aim_mm": (5.0, 1.5), "n_fragments": 196, "dih_px": (192, 192), "dih_planes": 25,
                 "card": {"card_pitch_mm": 0.5, "card_dot_mm": 0.2, "card_half_range_mm": 1.5, "card_planes": 21,
                          "card_depths_mm": [d for d in PAPER_DOT_CARD["depths_mm"] if abs(d) <= 10.0]},
                 "pellets": 6, "pellet_crop_px": (720, 720), "pellet_planes": 41, "pellet_alpha_range": (0.9609, 1.0606)}
-    return {"crop_px": (1320, 880), "planes": 1000, "alpha_range": PAPER_ALPHA_RANGES["drop_impact"], "spp": 16,
-            "taus": (2.6, 5.1, 7.7), "aim_mm": (5.0, 2.0), "n_fragments": 196, "dih_px": (1024, 1024), "dih_planes": 201,
+    return {"conditions": sorted(PAPER_TABLE_2), "crop_px": (1320, 880), "planes": 1000, "alpha_range": PAPER_ALPHA_RANGES["drop_impact"], "spp": 16,
+            "aim_mm": (5.0, 2.0), "n_fragments": 196, "dih_px": (1024, 1024), "dih_planes": 201,
             "card": {"card_pitch_mm": 3.0, "card_dot_mm": 1.0, "card_half_range_mm": 2.5, "card_planes": 51,
                      "card_depths_mm": list(PAPER_DOT_CARD["depths_mm"])},
             "pellets": 30, "pellet_crop_px": (1320, 880), "pellet_planes": 1000,
@@ -145,7 +152,7 @@ def render_dot_card_observations(sensor: dict, cam, *, depths_mm, pitch_mm: floa
                                                         up=mi.ScalarVector3f(*up.tolist())).matrix, dtype=np.float64)
         sc = target_scene([sensor], target, pose)
         raw = render_sensor(sc, sc.sensors()[0], spp=spp, seed=seed + 1 + k)
-        lf = decode(raw, optics=cam, white=white)
+        lf = decode(raw, optics=cam, white=white, spatial_oversample=SUPERSAMPLE)
         z = dz + np.linspace(-half_range_mm, half_range_mm, planes)
         uv, zd = locate_dots_in_stack(focal_stack(lf, z), z)
         world = markers_world(target, pose)
@@ -231,14 +238,14 @@ def plenoptic_point(item: dict) -> dict:
     raws = [render_backlit(sensor, p, d, seed=item["seed"] * 7 + 2 + k, **kw) for k, p in enumerate((p0, p1))]
     z = _stack_depths(cam, item["alpha_range"], item["planes"])
     tmp = Path(tempfile.mkdtemp(prefix="mitpiv_df_"))
-    lf_w = decode(white, optics=cam, white=white)
+    lf_w = decode(white, optics=cam, white=white, spatial_oversample=SUPERSAMPLE)
     bg = _stack(lf_w, z, tmp)
     c = item["dewarp"]
     dewarp = StackDewarp(np.asarray(c["coef"]), int(c["degree"]), np.asarray(c["centre"]), np.asarray(c["scale"]),
                          np.asarray(c["rms_mm"]))
     dets = []
     for raw in raws:
-        lf = decode(raw, optics=cam, white=white)
+        lf = decode(raw, optics=cam, white=white, spatial_oversample=SUPERSAMPLE)
         dets.append(_detect_world(cam, lf, _stack(lf, z, tmp), z, bg, dewarp))
     shutil.rmtree(tmp, ignore_errors=True)
     # truth inside the crop's view (for the counts)
@@ -300,10 +307,11 @@ def pellet_point(item: dict) -> dict:
     white = render_backlit(sensor, np.zeros((0, 3)), [], seed=item["seed"] * 5 + 1, **kw)
     z = _stack_depths(cam, item["alpha_range"], item["planes"])
     tmp = Path(tempfile.mkdtemp(prefix="mitpiv_df_"))
-    bg = _stack(decode(white, optics=cam, white=white), z, tmp)
+    bg = _stack(decode(white, optics=cam, white=white, spatial_oversample=SUPERSAMPLE), z, tmp)
     dets = []
     for k, p in enumerate((p0, p1)):
-        lf = decode(render_backlit(sensor, p, d, seed=item["seed"] * 5 + 2 + k, **kw), optics=cam, white=white)
+        lf = decode(render_backlit(sensor, p, d, seed=item["seed"] * 5 + 2 + k, **kw), optics=cam, white=white,
+                    spatial_oversample=SUPERSAMPLE)
         dets.append(_detect_world(cam, lf, _stack(lf, z, tmp), z, bg, None))  # no dot card for the pellets (ch. V.A)
     shutil.rmtree(tmp, ignore_errors=True)
     if len(dets[0]) == 0 or len(dets[1]) == 0:
@@ -318,10 +326,9 @@ def run(ctx) -> ReplicationResult:
     from mitpiv.physics.drop_impact import condition
 
     sc = _scale(ctx.quick)
-    row784 = condition(784)
-    items = [{"we": 784, "tau": tau, "seed": ctx.seed, "crop_px": list(sc["crop_px"]), "planes": sc["planes"],
+    items = [{"we": we, "tau": tau, "seed": ctx.seed, "crop_px": list(sc["crop_px"]), "planes": sc["planes"],
               "alpha_range": list(sc["alpha_range"]), "spp": sc["spp"], "aim_mm": list(sc["aim_mm"]),
-              "n_fragments": sc["n_fragments"], "k1": K1_MAIN_LENS} for tau in sc["taus"]]
+              "n_fragments": sc["n_fragments"], "k1": K1_MAIN_LENS} for we, tau in sc["conditions"]]
 
     def key(it):
         return (f"plen_we{it['we']}_tau{it['tau']}_s{it['seed']}_crop{it['crop_px'][0]}x{it['crop_px'][1]}"
@@ -343,17 +350,26 @@ def run(ctx) -> ReplicationResult:
                      f"_a{pel_item['alpha_range'][0]}_{pel_item['alpha_range'][1]}_spp{pel_item['spp']}_n{pel_item['n']}",
                      lambda: pellet_point(pel_item))
 
-    ref = plen[sc["taus"].index(5.1)]
-    p, disp = np.asarray(ref["positions_mm"]).reshape(-1, 3), np.asarray(ref["displacements_mm"]).reshape(-1, 3)
-    me = model_error(p, disp) if len(p) >= 3 else None
-    sx = me["x"]["sd_mm"] if me else math.nan
-    sz = me["z"]["sd_mm"] if me else math.nan
+    by = {(it["we"], it["tau"]): r for it, r in zip(items, plen, strict=True)}
+    stats = {}
+    for (we, tau), r in by.items():
+        p, disp = np.asarray(r["positions_mm"]).reshape(-1, 3), np.asarray(r["displacements_mm"]).reshape(-1, 3)
+        me = model_error(p, disp) if len(p) >= 3 else None
+        stats[(we, tau)] = {"sx": me["x"]["sd_mm"] if me else math.nan, "sz": me["z"]["sd_mm"] if me else math.nan,
+                            "mean_d": float(np.mean(r["diameters_mm"])) if r["diameters_mm"] else math.nan}
+    ref = by[(784, 5.1)]
+    sx, sz = stats[(784, 5.1)]["sx"], stats[(784, 5.1)]["sz"]
     crop_note = (f"crop {sc['crop_px'][0]}x{sc['crop_px'][1]} px of the 6600x4400 sensor aimed at "
                  f"({sc['aim_mm'][0]}, {sc['aim_mm'][1]}) mm; {ref['n_truth_visible']} fragments in view")
-    mean_d = [float(np.mean(r["diameters_mm"])) if r["diameters_mm"] else math.nan for r in plen]
-    ratio = np.asarray(mean_d) / row784.d0_mm
-    good = np.isfinite(ratio) & (ratio > 0)
-    q, n = power_law_fit(np.asarray(sc["taus"])[good], ratio[good]) if good.sum() >= 2 else (math.nan, math.nan)
+    laws, curves = {}, {}
+    for we in (624, 784, 1051):
+        taus = [tau for (w, tau) in sc["conditions"] if w == we]
+        ratio = np.asarray([stats[(we, tau)]["mean_d"] for tau in taus]) / condition(we).d0_mm
+        good = np.isfinite(ratio) & (ratio > 0)
+        laws[we] = power_law_fit(np.asarray(taus)[good], ratio[good]) if good.sum() >= 2 else (math.nan, math.nan)
+        if taus:
+            curves[f"mean_d_over_d0_we{we}"] = Curve(x=taus, y={"plenoptic": [_nan(v) for v in ratio.tolist()]},
+                                                     x_label="tau", y_label="d/d0")
     pd = np.asarray(pel["diameters_mm"])
     pdz = np.asarray(pel["dz_mm"])
     pel_mean = float(pd.mean()) if pd.size else math.nan
@@ -388,19 +404,30 @@ def run(ctx) -> ReplicationResult:
         compare_value("pellet_z_sd_over_d", "s.d. of the pellet z displacement over the mean diameter", "Fig. 33",
                       PAPER["pellet_z_sd_over_d"], pel_sd_over_d, rel=0.5, why="few pellets per run",
                       note=f"{skeleton}; {pdz.size} matched pellets"),
-        Row("q_we784", "q of d/d0 = q tau^n at We 784", "Fig. 28 (left)", "power law (value not printed)", _nan(q),
-            note=f"{skeleton}; the fragment model's law is a placeholder (q = 0.0603, n = 0) until [27]'s fits are "
-                 "transcribed: this row measures the detection's bias on it"),
-        Row("n_we784", "n of d/d0 = q tau^n at We 784", "Fig. 28 (left)", "power law (value not printed)", _nan(n),
-            note=skeleton),
     ]
-    curves = {"mean_d_over_d0_we784": Curve(x=list(sc["taus"]), y={"plenoptic": [_nan(r) for r in ratio.tolist()]},
-                                            x_label="tau", y_label="d/d0")}
+    not_run = "not run at the quick scale (Table 2's other conditions: full scale only)"
+    for (we, tau), (px, pz, _) in sorted(PAPER_TABLE_2.items()):
+        if (we, tau) == (784, 5.1):
+            continue
+        st = stats.get((we, tau), {"sx": math.nan, "sz": math.nan})
+        note = skeleton if (we, tau) in stats else not_run
+        rows += [compare_value(f"model_err_x_mm_we{we}_tau{tau}", f"s.d. of the x model error, We {we}, tau {tau}",
+                               "Table 2", px, st["sx"], unit="mm", rel=0.3, why="as at We 784, tau 5.1", note=note),
+                 compare_value(f"model_err_z_mm_we{we}_tau{tau}", f"s.d. of the z model error, We {we}, tau {tau}",
+                               "Table 2", pz, st["sz"], unit="mm", rel=0.3, why="as at We 784, tau 5.1", note=note)]
+    for we in (624, 784, 1051):
+        q, n = laws[we]
+        note = (f"{skeleton}; the fragment model's law is a placeholder (q = 0.0603, n = 0) until [27]'s fits are "
+                "transcribed: this row measures the detection's bias on it") if math.isfinite(q) else not_run
+        rows += [Row(f"q_we{we}", f"q of d/d0 = q tau^n at We {we}", "Fig. 28 (left)", "power law (value not printed)",
+                     _nan(q), note=note),
+                 Row(f"n_we{we}", f"n of d/d0 = q tau^n at We {we}", "Fig. 28 (left)", "power law (value not printed)",
+                     _nan(n), note=note)]
     sections = [
         "## Method (skeleton)\n\nThe paper's plenoptic camera (6600 x 4400 px of 5.5 um, 471 x 362 hexagonal "
         "lenslets of 77 um at 308 um, 105 mm main lens; |M| = 0.8235 fitted to the paper's alpha range) with a "
         f"radial main-lens distortion k1 = {K1_MAIN_LENS} (not stated in the paper), cropped to "
-        f"{sc['crop_px'][0]} x {sc['crop_px'][1]} px; fragments of We 784 at tau {sc['taus']} from the Yarin-Weiss "
+        f"{sc['crop_px'][0]} x {sc['crop_px'][1]} px; fragments at (We, tau) {sc['conditions']} from the Yarin-Weiss "
         f"crown model; focal stacks of {sc['planes']} planes evenly spaced in alpha over {sc['alpha_range']}; "
         "hybrid detection; "
         "dot-card dewarp (25 depths, second-order polynomial) from the dots' ray-bundle locations; nearest-neighbour "
