@@ -33,10 +33,14 @@ def test_quick_run_schema_and_ids(tmp_path):
 
 
 # Rendered dot cards through the ideal lens: the dots' stack locations in nominal
-# millimetres are the dots themselves up to the dot finder's error (measured: 1.4 um
-# lateral, 0.05 mm in depth on 0.1 mm planes, against a 93 um lenslet footprint).
+# millimetres are the dots themselves up to the dot finder's error. Measured (2x supersampled
+# stacks of 0.1 mm planes): 0.8 um lateral RMS (the lenslet footprint is 93 um); in depth a
+# scatter of 0.01-0.015 mm per card and a bias towards the focal plane of ~0.1 mm at
+# +-2.5 mm (the sharpest refocused plane is pulled towards the lenslet plane; the
+# dot-card dewarp absorbs it).
 CARD_LATERAL_RMS_MM = 0.01
-CARD_DEPTH_RMS_MM = 0.1
+CARD_DEPTH_SD_MM = 0.03
+CARD_DEPTH_BIAS_MM = 0.15
 
 
 def test_rendered_dot_cards_locate_the_dots():
@@ -51,4 +55,6 @@ def test_rendered_dot_cards_locate_the_dots():
     np.testing.assert_allclose(np.unique(np.round(obs["xyz"][:, 2], 6)), [-2.5, 2.5], atol=1e-6)
     err = obs["uva"] - obs["xyz"]
     assert np.sqrt(np.mean(err[:, :2] ** 2)) < CARD_LATERAL_RMS_MM
-    assert np.sqrt(np.mean(err[:, 2] ** 2)) < CARD_DEPTH_RMS_MM
+    for k in (0, 1):
+        e = err[obs["depth_index"] == k, 2]
+        assert e.std() < CARD_DEPTH_SD_MM and abs(e.mean()) < CARD_DEPTH_BIAS_MM
