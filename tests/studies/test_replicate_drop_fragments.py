@@ -25,6 +25,8 @@ def test_quick_run_schema_and_ids(tmp_path):
     assert rows["n_found_plenoptic_we784_tau5.1"]["ours"] >= 1
     assert rows["n_found_dih_we784_tau5.1"]["ours"] >= 1
     assert abs(rows["pellet_mean_d_mm"]["ours"] - 2.0) < PELLET_D_ATOL_MM
+    assert rows["shock_bands_dih_not_plenoptic"]["agrees"] is True  # the bands of Figs. 30-31
+    assert {f"model_err_z_mm_we{we}_tau{tau}" for we, tau in ((624, 2.3), (1051, 9.0))} <= set(rows)
     for k in ("model_err_x_mm_we784_tau5.1", "model_err_z_mm_we784_tau5.1"):
         assert rows[k]["ours"] is None or (math.isfinite(rows[k]["ours"]) and rows[k]["ours"] >= 0)
     c = res["curves"]["mean_d_over_d0_we784"]
