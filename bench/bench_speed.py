@@ -10,6 +10,10 @@ Rows (each: our time, the baseline's, the ratio, the accuracy difference):
 * 3D multi-pass PIV (64-48-32, 75 % overlap, Lamb-Oseen vortex) on a volume of
   ``--piv-shape`` voxels: ours vs the frozen pre-issue piv3d (bench/reference_piv3d.py);
   OpenPIV's 3D single pass at 32^3 windows beside them (time and RMS error).
+* Normalised cross-correlation (the channel-tomo paper's eq. 3) of window stacks in search
+  regions, the first pass (36^3 windows, 18-voxel margin) and a later one (24^3, 6): ours
+  (float32 FFTs of the fluctuations, compiled running box sums) vs the frozen float64 /
+  summed-volume-table code (bench/reference_ncc.py); largest coefficient difference.
 * Focal stack of a plenoptic raw image (additive): ours vs shift-and-add over the
   sub-aperture views with scipy.ndimage.shift (bilinear).
 * 1000-plane focal stack of a 6600x4400 raw image: ours and the pre-issue plane kernel on
@@ -160,6 +164,24 @@ def piv_rows(shape):
         print(f"OpenPIV not available: {exc}")
 
 
+def ncc_rows(quick):
+    from reference_ncc import normalised_cross_correlation as ncc_reference
+
+    from mitpiv.analysis.piv3d import normalised_cross_correlation as ncc
+
+    rng = np.random.default_rng(0)
+    ncc(*(rng.random((1, 4, 4, 4 + k), dtype=np.float32) for k in (0, 4)))  # compile
+    for w, m, n in ((36, 18, 20 if quick else 60), (24, 6, 100 if quick else 300)):
+        # particle-like stacks on a background: sparse bright voxels plus a haze
+        a = (rng.random((n, w, w, w), dtype=np.float32) ** 40 + 0.1).astype(np.float32)
+        b = (rng.random((n, w + 2 * m, w + 2 * m, w + 2 * m), dtype=np.float32) ** 40 + 0.1).astype(np.float32)
+        g1, t1, c1 = timed(ncc, a, b)
+        g0, t0, c0 = timed(ncc_reference, a, b)
+        emit(f"NCC {n} windows {w}^3, margin {m}", t1, "float64 FFT + summed-volume tables", t0,
+             f"max |gamma diff| {float(np.max(np.abs(g1 - g0))):.1e}",
+             f"per vector {1e3 * t1 / n:.1f} ms vs {1e3 * t0 / n:.1f} ms")
+
+
 # ------------------------------------------------------------------------------ focal stacks
 def focal_rows(n_px, planes):
     from bench_lightfield import baseline_plane, synthetic_lf
@@ -273,7 +295,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="smaller cases (a few minutes)")
     ap.add_argument("--scale", type=float, default=None, help="MART lateral scale (1 = 480x320x130)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks.md"))
-    ap.add_argument("--sections", default="mart,piv,focal,big,scaling", help="comma-separated subset to run")
+    ap.add_argument("--sections", default="mart,piv,ncc,focal,big,scaling", help="comma-separated subset to run")
     a = ap.parse_args(argv)
     scale = a.scale or (0.3 if a.quick else 0.5)
     print("| stage | ours | baseline | baseline time | ratio | accuracy | notes |")
@@ -283,6 +305,8 @@ def main(argv=None):
         mart_rows(scale, 10 if a.quick else 40)
     if "piv" in sections:
         piv_rows((64, 160, 160) if a.quick else (80, 256, 256))
+    if "ncc" in sections:
+        ncc_rows(a.quick)
     if "focal" in sections:
         focal_rows(800 if a.quick else 1600, 11 if a.quick else 21)
     if "big" in sections:
@@ -293,7 +317,7 @@ def main(argv=None):
             + (" --quick" if a.quick else "") + f"` (`make bench`). Machine: {machine()}.\n\n"
             "The machine is shared with other jobs: absolute times are noisy; each ratio compares two "
             "codes timed one after the other in the same run. Baselines: the pre-issue code paths are frozen "
-            "copies (bench/reference_mart.py, bench/reference_piv3d.py, bench/reference_refocus.py).\n\n"
+            "copies (bench/reference_mart.py, bench/reference_piv3d.py, bench/reference_ncc.py, bench/reference_refocus.py).\n\n"
             "| stage | ours | baseline | baseline time | ratio | accuracy | notes |\n|---|---|---|---|---|---|---|\n"
             + "\n".join(ROWS) + "\n")
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)

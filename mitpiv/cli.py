@@ -548,6 +548,15 @@ def cmd_sweep(args) -> int:
                    progress=_progress(args))
     ok = int((df["status"] == "ok").sum())
     print(f"{ok}/{len(df)} points ok -> {args.out}/results.csv, results.parquet")
+    if args.tracking_results:
+        from mitpiv.studies.tracking_study import write_tracking_study
+
+        doc = write_tracking_study(args.out, args.tracking_results)
+        for r in doc["rows"]:
+            vals = " ".join(f"{k}={r[k]:.4g}" if isinstance(r[k], float) else f"{k}={r[k]}"
+                            for k in ("ppp", "yield", "ghost_fraction", "position_error_px", "velocity_error", "wall_s"))
+            print(f"  {r['method']:12s} {vals}" + (f"  [{r['error']}]" if r["error"] else ""))
+        print(f"wrote {args.tracking_results}/results.json and {len(doc['figures'])} figures")
     failed = df[df["status"] != "ok"]
     for _, row in failed.iterrows():
         print(f"  failed {row['point']}: {row['error']}")
@@ -793,6 +802,8 @@ def main(argv=None) -> int:
     w.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (default: a local cluster)")
     w.add_argument("--workers", type=_int_in(1, 512), default=None, help="local cluster worker processes (default 2)")
     w.add_argument("--full", action="store_true", help="the full-size study (the study's [full] overrides)")
+    w.add_argument("--tracking-results", default=None, metavar="DIR", help="a tracking study: write results.json "
+                   "(one row per method and density) and a figure per metric against ppp into DIR")
     w.set_defaults(func=cmd_sweep)
     ex = sub.add_parser("export", help="export a finished run folder for other tools (--vtk: ParaView files; "
                         "--openlpt / --openptv: inputs of those trackers)")

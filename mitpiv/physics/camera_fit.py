@@ -271,6 +271,21 @@ def fit_pinhole_camera(pixels_px, world_mm, *, resolution, distortion: str = "br
         raise CalibrationError("calibrate: the linear start puts the markers behind the camera; check the labels.")
     f0 = 0.5 * (k[0, 0] + k[1, 1])
     k0 = np.array([[f0, 0, k[0, 2] - 0.5], [0, f0, k[1, 2] - 0.5], [0, 0, 1.0]])
+    wd, ht = (float(v) for v in resolution)
+    start = "dlt"
+    if not (0.0 <= k0[0, 2] < wd and 0.0 <= k0[1, 2] < ht):
+        # A narrow field of view (a long lens, a small crop) is nearly affine: with noisy
+        # points the DLT's principal point is poorly determined and can leave the image,
+        # which OpenCV refuses as a start. Start instead from the image centre, the DLT's
+        # focal length and the pose that solvePnP fits with these intrinsics fixed.
+        k0 = np.array([[f0, 0, 0.5 * wd - 0.5], [0, f0, 0.5 * ht - 0.5], [0, 0, 1.0]])
+        ok, rv, tv = cv2.solvePnP(w, (px - 0.5).reshape(-1, 1, 2), k0, np.zeros(5), flags=cv2.SOLVEPNP_ITERATIVE)
+        if not ok:
+            raise CalibrationError("calibrate: the linear start's principal point lies outside the image and "
+                                   "OpenCV's solvePnP found no pose from the image centre; check the markers.")
+        r, _ = cv2.Rodrigues(rv)
+        t = np.asarray(tv, float).ravel()
+        start = "image centre + solvePnP (the DLT principal point left the image)"
     flags = cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_ASPECT_RATIO
     if distortion == "none":
         flags |= cv2.CALIB_FIX_K1 | cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST
@@ -296,7 +311,7 @@ def fit_pinhole_camera(pixels_px, world_mm, *, resolution, distortion: str = "br
         principal_point_px=(float(kk[0, 2]) + 0.5, float(kk[1, 2]) + 0.5),
         distortion=Distortion(k1=d[0], k2=d[1], p1=d[2], p2=d[3], k3=d[4]),
     )
-    return cam, {"model": "pinhole", "distortion": distortion, "dlt_focal_px": float(f0)}
+    return cam, {"model": "pinhole", "distortion": distortion, "dlt_focal_px": float(f0), "start": start}
 
 
 # ---------------------------------------------------------------------- polynomial

@@ -49,8 +49,8 @@ from mitpiv.errors import ConfigError, check_positive
 from mitpiv.physics.camera import on_sensor
 from mitpiv.physics.distortion import Distortion, distort, distort_jacobian, fold_radius, undistort
 
-__all__ = ["PlenopticCamera", "PRESETS", "preset", "PAPER_003", "paper_003_camera", "thin_lens_image_distance", "alpha_from_z_geom", "dof_limits_geom",
-           "depth_resolution_geom"]
+__all__ = ["PlenopticCamera", "PRESETS", "preset", "PAPER_003", "paper_003_camera", "thin_lens_image_distance",
+           "alpha_from_z_geom", "dof_limits_geom", "depth_resolution_geom", "ltpr"]
 
 _OWNER = "plenoptic"
 
@@ -804,3 +804,24 @@ def depth_resolution_geom(f, so, aperture, pitch, n_u) -> float:
 
 
 _dof_limits = dof_limits_geom  # deprecated private name
+
+
+def ltpr(lf_resolution_px, tomo_resolution_px, n_cameras: int) -> float:
+    """Light-field-camera to tomographic-cameras pixel ratio (Shi et al., 'A detailed comparison
+    of single-camera light-field PIV and tomographic PIV', section 2)::
+
+        LTPR = (p_x p_y)_LF-PIV / (p_x p_y N_c)_Tomo-PIV
+
+    Parameters
+    ----------
+    lf_resolution_px : (p_x, p_y) of the light-field camera [px]
+    tomo_resolution_px : (p_x, p_y) of each tomographic camera [px]
+    n_cameras : N_c, the tomographic cameras (>= 1)
+    """
+    lf = np.broadcast_to(np.asarray(lf_resolution_px, dtype=float), (2,))
+    tomo = np.broadcast_to(np.asarray(tomo_resolution_px, dtype=float), (2,))
+    if not (np.all(lf > 0) and np.all(tomo > 0)):
+        raise ConfigError(f"ltpr: resolutions must be positive, got {lf.tolist()} and {tomo.tolist()} px.")
+    if isinstance(n_cameras, bool) or int(n_cameras) != n_cameras or n_cameras < 1:
+        raise ConfigError(f"ltpr: 'n_cameras' must be an integer >= 1, got {n_cameras!r}.")
+    return float(lf[0] * lf[1] / (tomo[0] * tomo[1] * int(n_cameras)))

@@ -150,6 +150,8 @@ def _model_of(ann, raw) -> type[BaseModel] | None:
 
 def _where(loc: tuple) -> tuple[str, str]:
     parts = [str(p) for p in loc]
+    if not parts:  # a check across tables (a model validator of the whole experiment)
+        return "", "tables"
     if len(parts) == 1:
         return "", parts[0]
     # a discriminated union inserts the tag as a loc element: drop it

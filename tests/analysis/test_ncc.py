@@ -9,7 +9,10 @@ from mitpiv.analysis.piv3d import normalised_cross_correlation, piv3d
 from mitpiv.errors import ConfigError
 from mitpiv.reconstruct import VoxelGrid
 
-NCC_ATOL = 1e-12  # float64 FFT and summed-volume tables against direct sums: rounding only
+NCC_ATOL = 1e-12  # float64 FFT and running box sums against direct sums: rounding only
+# float32 inputs take single-precision FFTs: rounding of ~eps32 (6e-8) times log2 of the
+# transform size relative to the energies, on a coefficient in [-1, 1]
+NCC_F32_ATOL = 1e-5
 # Mean displacement of interior windows, a uniform sub-voxel shift, cubic deformation:
 # the FFT correlation holds 0.03 voxel (tests/analysis/test_piv3d.py); the NCC likewise.
 SHIFT_BIAS_TOL_VOX = 0.03
@@ -48,6 +51,19 @@ def test_ncc_matches_the_formula_by_hand():
     assert np.all(normalised_cross_correlation(np.ones((1, 4, 5, 3)), f[:1]) == 0)
     with pytest.raises(ConfigError, match="grown by an even"):
         normalised_cross_correlation(t, f[:, :7])
+
+
+def test_ncc_single_precision_path_matches_the_formula_on_a_bright_background():
+    """piv3d's float32 volumes take the single-precision FFT path; a background 1000 times the
+    fluctuations (a reconstruction's haze) must not cost accuracy: F's mean is removed first."""
+    rng = np.random.default_rng(5)
+    t = (rng.random((3, 6, 5, 7)) + 1000.0).astype(np.float32)
+    f = (rng.random((3, 12, 9, 11)) + 1000.0).astype(np.float32)
+    got = normalised_cross_correlation(t, f)
+    for n in range(3):
+        ref = _ncc_by_hand(t[n].astype(np.float64), f[n].astype(np.float64))
+        assert np.abs(got[n] - ref).max() < NCC_F32_ATOL
+        assert np.argmax(got[n]) == np.argmax(ref)
 
 
 def test_piv3d_with_ncc_recovers_a_shift():

@@ -19,6 +19,8 @@ Experiment file (paths relative to it; ``mitpiv schema --kind tracking`` lists e
     [tracking]     bounds_mm, tolerance_px, search_px, ... (mitpiv.tracking.stb.stb)
     [evaluate]     radius_px, bin_mm
     [output]       vtk = true: ParaView files of the tracks in RUN/vtk
+    [compare]      openlpt = true, tomo = true, tomo_*: other methods on the same images (opt-in,
+                   mitpiv.studies.kinds.tracking_compare)
 
 Stages: ``field`` (seeding and advection, :func:`mitpiv.physics.sequence.advect_sequence`;
 one PLY per frame and the truth in the one truth format, with identities, velocities and
@@ -32,7 +34,9 @@ images), ``track`` (:func:`mitpiv.tracking.stb.stb`; a sequence shorter than fou
 reconstructed frame by frame with IPR and has no velocities), ``evaluate``
 (:func:`mitpiv.tracking.metrics.track_metrics` and :func:`~mitpiv.tracking.metrics.bin_tracks`),
 ``report`` (:func:`mitpiv.studies.report.tracking_report`) and ``vtk`` (with
-``[output] vtk = true``).
+``[output] vtk = true``). With ``[compare]``, ``openlpt`` and ``tomo`` run between evaluate
+and report (:mod:`mitpiv.studies.kinds.tracking_compare`: OpenLPT's STB and MART + 3-D PIV
+on the same frames and cameras, scored by :func:`score_tracks` and :func:`binned_error`).
 
 The calibration runs after the rendering (the scene's cameras do not depend on it), so a
 changed calibration setting does not render again.
@@ -52,6 +56,7 @@ from pydantic import Field, model_validator
 
 from mitpiv.errors import CalibrationError, ConfigError
 from mitpiv.studies.kinds.tomo import SceneTable
+from mitpiv.studies.kinds.tracking_compare import CompareTable
 from mitpiv.studies.runner import RENDER_PACKAGES, Kind, Stage, StageContext
 from mitpiv.studies.schema import Table, Vec3
 
@@ -193,6 +198,13 @@ class _Experiment(Table):
     def _sizes(self):
         from mitpiv import costs
 
+        c, n = self.compare, self.sequence.frames
+        if c.tomo and n < 2:
+            raise ValueError(f"[compare] tomo = true correlates frame pairs: it needs [sequence] frames >= 2, got {n}")
+        if c.tomo and c.tomo_pairs is not None and c.tomo_pairs > n - 1:
+            raise ValueError(f"[compare] tomo_pairs = {c.tomo_pairs} exceeds the {n - 1} frame pair(s) of [sequence] "
+                             f"frames = {n}; give at most {n - 1} or leave it out (all pairs)")
+
         if self.seeding.count is not None:
             n = self.seeding.count * self.sequence.frames  # particle samples; truth: 3 arrays of 3 float64
             costs.check_memory(costs.Cost(memory_bytes=2 * 9 * 8 * n, seconds=0.0, items=f"{n} particle samples"),
@@ -220,6 +232,8 @@ def schema():
         "tracking": (TrackingTable, Field(default_factory=TrackingTable, description="Shake-The-Box")),
         "evaluate": (EvaluateTable, Field(default_factory=EvaluateTable, description="scoring")),
         "output": (OutputTable, Field(default_factory=OutputTable, description="extra output files")),
+        "compare": (CompareTable, Field(default_factory=CompareTable, description="other methods on the same images "
+                                                                               "(opt-in)")),
     }
     return create_model("TrackingExperiment", __base__=_Experiment,
                         __doc__="A time-resolved particle tracking experiment: seeded flow over N frames, rendered, "
@@ -457,9 +471,8 @@ def stage_calibrate(ctx: StageContext) -> dict:
         except CalibrationError as e:
             raise CalibrationError(
                 f"experiment: [calibration] model = 'pinhole': camera {sid!r} ({int(vis.sum())} target points, "
-                f"noise_px = {c.noise_px}): {e} A narrow field of view (a long lens, a small crop) is nearly affine: "
-                f"with noisy points the linear start misplaces the principal point. Use model = 'true', a smaller "
-                f"noise_px or a larger crop.") from None
+                f"noise_px = {c.noise_px}): {e} Use model = 'true', a smaller noise_px or more target points "
+                f"([calibration] points).") from None
         fitted.append(mapping.camera)
         reports.append(mapping.fit_report)
     return _write_cameras(ctx.out, fitted, true, ids, reports)
@@ -574,27 +587,63 @@ def _grid(cfg, lo, hi):
     return VoxelGrid.from_bounds(tuple(lo), tuple(hi), vox)
 
 
-def stage_evaluate(ctx: StageContext) -> dict:
-    from mitpiv.io import write_npz
-    from mitpiv.studies.kinds.tomo import null_metrics
-    from mitpiv.tracking import Tracks, bin_tracks, mm_per_px, track_metrics
+def truth_tracks(run: Path):
+    """The true trajectories of a run as :class:`~mitpiv.tracking.stb.Tracks` (particles,
+    frames, 3), with the true velocities and accelerations."""
+    from mitpiv.tracking import Tracks
 
-    cfg = ctx.cfg
-    run = ctx.run_dir
-    cams = load_cameras(run)
+    truth = _truth(run)
+    pos = np.transpose(truth["positions_mm"], (1, 0, 2))
+    vel, acc = truth["velocities_mm_s"], truth["accelerations_mm_s2"]
+    vel = None if vel is None or vel.ndim != 3 else np.transpose(vel, (1, 0, 2))
+    acc = None if acc is None else np.transpose(acc, (1, 0, 2))
+    dt = np.diff(np.asarray(truth["times_s"], float))
+    return Tracks(pos, np.ones(pos.shape[:2]), float(dt[0]) if dt.size else 1.0, vel, acc)
+
+
+def eulerian_grid(cfg):
+    """The Eulerian grid every method's velocities are binned on ([evaluate] bin_mm over the
+    measurement box)."""
+    lo, hi = bounds_of(cfg)
+    return _grid(cfg, lo, hi)
+
+
+def binned_error(found_mean, found_count, ref_mean, ref_count) -> dict:
+    """Velocity error on an Eulerian grid: ``binned_mean_error_mm_s`` (RMS over the bins
+    that both fill of the difference of the mean velocities [mm/s]), ``binned_error_rel``
+    (divided by the RMS of the true bin means there) and ``binned_coverage`` (filled true bins
+    that the method fills too); NaN where no bin is shared."""
+    both = (np.asarray(found_count) > 0) & (np.asarray(ref_count) > 0)
+    d = np.asarray(found_mean)[both] - np.asarray(ref_mean)[both]
+    err = float(np.sqrt(np.mean(np.sum(d**2, axis=1)))) if d.size else float("nan")
+    ref = float(np.sqrt(np.mean(np.sum(np.asarray(ref_mean)[both] ** 2, axis=1)))) if d.size else 0.0
+    return {"binned_mean_error_mm_s": err, "binned_error_rel": err / ref if ref > 0 else float("nan"),
+            "binned_coverage": float(both.sum() / max(int((np.asarray(ref_count) > 0).sum()), 1))}
+
+
+def score_tracks(cfg, run: Path, tracks) -> dict:
+    """Score tracks of a run's sequence against its truth (the evaluate stage's scoring, for
+    mitpiv's tracks and a peer's alike).
+
+    Returns
+    -------
+    dict: ``metrics`` (:func:`~mitpiv.tracking.metrics.track_metrics` without ``per_frame``
+    and ``length_histogram``, plus ppp, the match radius, track counts, the calibration error
+    and, when the tracks carry velocities, the binned errors of :func:`binned_error`),
+    ``per_frame``, ``length_histogram``, ``velocity_error_mm_s`` ((tracks, frames), NaN where
+    unmatched) and ``binned`` (the bin arrays for ``errors.npz``; empty without velocities).
+    """
     from mitpiv.io import camera_from_metadata, read_json
+    from mitpiv.tracking import bin_tracks, mm_per_px, track_metrics
 
+    cams = load_cameras(run)
     true_cams = [camera_from_metadata(c) for c in read_json(run / "calibrate" / "cameras.json")["true"]]
     truth = _truth(run)
-    tracks = read_tracks(run / "track" / "tracks.npz")
+    ref_tracks = truth_tracks(run)
     lo, hi = bounds_of(cfg)
     scale = mm_per_px(true_cams, 0.5 * (lo + hi))
     radius = cfg.evaluate.radius_px * scale
-    pos = np.transpose(truth["positions_mm"], (1, 0, 2))
-    vel = truth["velocities_mm_s"]
-    acc = truth["accelerations_mm_s2"]
-    vel = None if vel is None or vel.ndim != 3 else np.transpose(vel, (1, 0, 2))
-    acc = None if acc is None else np.transpose(acc, (1, 0, 2))
+    pos, vel, acc = ref_tracks.positions_mm, ref_tracks.velocities_mm_s, ref_tracks.accelerations_mm_s2
     m = track_metrics(tracks, pos, radius_mm=radius, truth_velocities_mm_s=vel, truth_accelerations_mm_s2=acc,
                       cameras=true_cams, lower_mm=lo, upper_mm=hi)
     per_frame = m.pop("per_frame")
@@ -627,14 +676,24 @@ def stage_evaluate(ctx: StageContext) -> dict:
     if tracks.velocities_mm_s is not None and vel is not None:
         grid = _grid(cfg, lo, hi)
         found = bin_tracks(tracks, grid)
-        ref = bin_tracks(Tracks(pos, np.ones(pos.shape[:2]), tracks.dt_s, vel, acc), grid)
-        both = (found["count"] > 0) & (ref["count"] > 0)
-        d = found["mean_mm_s"][both] - ref["mean_mm_s"][both]
-        m["binned_mean_error_mm_s"] = float(np.sqrt(np.mean(np.sum(d**2, axis=1)))) if d.size else float("nan")
-        m["binned_coverage"] = float(both.sum() / max(int((ref["count"] > 0).sum()), 1))
+        ref = bin_tracks(ref_tracks, grid)
+        m.update(binned_error(found["mean_mm_s"], found["count"], ref["mean_mm_s"], ref["count"]))
         binned = {"bin_count": found["count"], "bin_mean_mm_s": found["mean_mm_s"], "bin_std_mm_s": found["std_mm_s"],
                   "bin_true_mean_mm_s": ref["mean_mm_s"], "bin_origin_mm": np.asarray(grid.origin_mm, float),
                   "bin_voxel_mm": np.asarray(grid.voxel_mm, float)}
+    return {"metrics": m, "per_frame": per_frame, "length_histogram": hist, "velocity_error_mm_s": vel_err,
+            "binned": binned}
+
+
+def stage_evaluate(ctx: StageContext) -> dict:
+    from mitpiv.io import write_npz
+    from mitpiv.studies.kinds.tomo import null_metrics
+
+    cfg = ctx.cfg
+    tracks = read_tracks(ctx.run_dir / "track" / "tracks.npz")
+    sc = score_tracks(cfg, ctx.run_dir, tracks)
+    m, per_frame, hist, vel_err, binned = (sc[k] for k in ("metrics", "per_frame", "length_histogram",
+                                                            "velocity_error_mm_s", "binned"))
     write_npz(ctx.out / "errors.npz", {"velocity_error_mm_s": vel_err, "length_histogram": np.asarray(hist),
                                        "yield_per_frame": np.array([p["yield"] for p in per_frame], float),
                                        "ghost_per_frame": np.array([p["ghost_fraction"] for p in per_frame], float),
@@ -653,7 +712,7 @@ def stage_evaluate(ctx: StageContext) -> dict:
                                               "error is undefined",
                     "": "not computable"})
     for k in ("velocity_error_mm_s", "velocity_error_rel", "acceleration_error_mm_s2", "acceleration_error_rel",
-              "binned_mean_error_mm_s"):
+              "binned_mean_error_mm_s", "binned_error_rel"):
         if m.get(k) is None:
             m[k] = float("nan")  # no value: None in the result, with its reason
     out = null_metrics(m, reasons, where="tracking evaluate")
@@ -719,6 +778,8 @@ def export_vtk(run_dir, out_dir=None, *, progress=None) -> list[Path]:
 
 
 def stages(cfg) -> list[Stage]:
+    from mitpiv.studies.kinds.tracking_compare import stages as compare_stages
+
     dens = cfg.seeding.ppp is not None
     out = [Stage("field", ("seed", "seeding", "flow", "sequence") + (("scene", "render") if dens else ()), stage_field,
                  files=scene_files if dens else None, packages=RENDER_PACKAGES if dens else ()),
@@ -727,6 +788,7 @@ def stages(cfg) -> list[Stage]:
            Stage("otf", ("otf", "tracking"), stage_otf),
            Stage("track", ("tracking", "flow"), stage_track),
            Stage("evaluate", ("evaluate",), stage_evaluate),
+           *compare_stages(cfg),
            Stage("report", (), stage_report)]
     if cfg.output.vtk:
         out.append(Stage("vtk", ("output",), stage_vtk))
@@ -736,25 +798,35 @@ def stages(cfg) -> list[Stage]:
 # ------------------------------------------------------------------------------- summary
 METRIC_KEYS = ("yield", "ghost_fraction", "position_error_px", "position_error_mm", "velocity_error_mm_s",
                "velocity_error_rel", "acceleration_error_mm_s2", "acceleration_error_rel", "correct_track_fraction",
-               "mean_track_length", "n_tracks", "ppp", "binned_mean_error_mm_s", "calibration_error_px")
+               "mean_track_length", "n_tracks", "ppp", "binned_mean_error_mm_s", "binned_error_rel", "binned_coverage",
+               "calibration_error_px")
 
 
 def summary(cfg, results: dict) -> dict:
     """metrics.json of a tracking run: the evaluate stage's metrics, the particle count and
     the tracking method."""
+    from mitpiv.studies.kinds.tracking_compare import summary as compare_summary
+
     ev = results.get("evaluate") or {}
-    return {"name": cfg.name, "seed": cfg.seed, "kind": "tracking", "evaluate": ev,
-            "n_particles": (results.get("field") or {}).get("n_particles"), "frames": cfg.sequence.frames,
-            "method": (results.get("track") or {}).get("method")}
+    out = {"name": cfg.name, "seed": cfg.seed, "kind": "tracking", "evaluate": ev,
+           "n_particles": (results.get("field") or {}).get("n_particles"), "frames": cfg.sequence.frames,
+           "method": (results.get("track") or {}).get("method")}
+    compare = compare_summary(results)
+    if compare:
+        out["compare"] = compare
+    return out
 
 
 def row(metrics: dict) -> dict:
     """The sweep-table columns: the LPT Challenge metrics (yield, ghost_fraction,
-    position_error_px, ...), ppp, n_particles, frames."""
+    position_error_px, ...), ppp, n_particles, frames, and with ``[compare]`` the other
+    methods' scalar results as ``openlpt.<key>`` and ``tomo.<key>``."""
     ev = metrics.get("evaluate") or {}
     out = {k: ev.get(k) for k in METRIC_KEYS}
     out.update({"n_particles": metrics.get("n_particles"), "frames": metrics.get("frames"),
                 "method": metrics.get("method")})
+    for name, res in (metrics.get("compare") or {}).items():  # opt-in methods: "openlpt.yield", "tomo.wall_s", ...
+        out.update({f"{name}.{k}": v for k, v in res.items() if isinstance(v, int | float | str | bool) or v is None})
     return out
 
 

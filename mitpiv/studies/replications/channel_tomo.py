@@ -85,9 +85,11 @@ def scale(quick: bool) -> dict:
 
 #: single-core rates, measured on the 2-core machine under a load of ~4 (wall times divided by
 #: the load): SMART + rendering per million voxels and frame; NCC PIV per vector and pass for a
-#: 32-voxel window (scaling with the window's volume); one pose's calibration
+#: 32-voxel window (scaling with the window's volume; 0.012 before the NCC's compiled local
+#: energies and single-precision FFTs, 3.6-4.7x faster in bench/bench_speed.py --sections ncc);
+#: one pose's calibration
 SECONDS_PER_MVOXEL_FRAME = 8.0
-SECONDS_PER_VECTOR_32 = 0.012
+SECONDS_PER_VECTOR_32 = 0.003
 SECONDS_PER_CALIBRATION = 0.4
 
 
@@ -201,7 +203,7 @@ def run(ctx) -> ReplicationResult:
     cals = ctx.map(calibration_point, pts["cal"], key=_cal_key, desc="calibrations")
     cal = dict(zip(pts["cal"], cals, strict=True))
     items = []
-    for it in pts["piv"] + pts["q"]:  # PIV points first: the statistics rows are read there
+    for it in pts["q"] + pts["piv"]:  # Q-only points first: the theta-phi maps need no PIV and are cheap
         items.append({**it, "base_seed": ctx.seed,
                       "calibrations": [cal[(a, e, it["lv"], it["crop"])] for a, e in it["poses"]]})
     res = ctx.map(evaluation_point, items, key=lambda it: _key(it) + f"_b{it['base_seed']}", desc="points")

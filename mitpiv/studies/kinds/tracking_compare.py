@@ -1,0 +1,342 @@
+"""Other methods on a tracking experiment's images (issue 27, item 7): OpenLPT's
+Shake-The-Box and mitpiv's tomographic PIV, scored against the same truth as mitpiv's STB.
+
+Opt-in: an experiment without a ``[compare]`` table (or with ``openlpt = false``,
+``tomo = false``, the defaults) has no extra stage and costs nothing. With it::
+
+    [compare]
+    openlpt = true         # OpenLPT STB (PyPI openlpt) on the rendered frames
+    tomo = true            # MART / SMART volumes of the frames + multi-pass 3-D PIV
+    tomo_method = "mart"   # or "smart"; tomo_voxel_mm, tomo_iterations, tomo_windows, ...
+
+Stages (after ``evaluate``, before ``report``; each reuses the render and calibrate stages'
+outputs, so a changed ``[compare]`` setting reruns only these and the report):
+
+``openlpt``
+    the frames and the calibrated cameras (``calibrate/cameras.json``, the cameras mitpiv's
+    STB uses) exported by :func:`mitpiv.io.openlpt.export_openlpt` (distorted cameras with
+    ``undistort=True``, the work-around of openlpt 2.2.4's stereo matching), OpenLPT run by
+    :func:`mitpiv.tracking.peers.run_openlpt`, its long tracks regularised by mitpiv's
+    regularisation and scored by :func:`mitpiv.studies.kinds.tracking.score_tracks` (the
+    evaluate stage's scoring). OpenLPT's settings follow the experiment (below) unless
+    ``openlpt_settings`` overrides them. A failure of OpenLPT (not installed, its exit status,
+    a time-out, no tracks) does not fail the run: the stage records ``status = "failed"``
+    and ``error``, the exact reason, and null metrics.
+``tomo``
+    every frame of ``tomo_pairs + 1`` consecutive frames reconstructed by MART / SMART
+    (:func:`mitpiv.reconstruct.tomo.reconstruct_volume`, the calibrated cameras, one weight
+    cache) on a voxel grid over the measurement box, consecutive volumes correlated by
+    :func:`mitpiv.analysis.piv3d` (velocities [mm/s] at the window centres), the valid
+    vectors of all pairs averaged per bin of the evaluate stage's Eulerian grid and compared
+    with the true trajectories over the same frames binned on it
+    (:func:`~mitpiv.studies.kinds.tracking.binned_error`; with all pairs, the same binned
+    truth as the tracks').
+    Yield, ghost fraction and particle position error do not apply to tomographic PIV (it
+    measures window-averaged displacements of voxel intensity, not particles): they are
+    null with that reason.
+
+Every stage records its own wall time (``wall_s``: OpenLPT's run without the export;
+reconstruction plus correlation for tomo, after a warm-up that compiles its Numba kernels,
+``warm_up_s``); the runner records the stage's total too
+(``seconds.openlpt``, ``seconds.tomo`` in a sweep row).
+
+OpenLPT settings derived from the experiment (``openlpt_settings`` overrides any of
+:class:`mitpiv.io.openlpt.OpenLPTSettings`' fields): OpenLPT's voxel is one pixel in object
+space at the box centre (``mm_per_px``); its initial search radius covers the displacement
+per frame of ``[tracking] velocity_guess_mm_s`` plus ``[tracking] search_px`` (OpenLPT has
+no velocity guess); the predictive-field search radius is 1.5 times that; the 2-D tolerance
+is ``[tracking] tolerance_px``, the 3-D one half of it; the neighbour spacing the mean
+spacing of the particles at frame 0.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from mitpiv.errors import ConfigError
+from mitpiv.studies.runner import Stage, StageContext
+from mitpiv.studies.schema import Table
+
+PosFloat = Annotated[float, Field(gt=0)]
+Window = Annotated[int, Field(ge=4)] | tuple[Annotated[int, Field(ge=4)], Annotated[int, Field(ge=4)],
+                                             Annotated[int, Field(ge=4)]]
+
+#: The methods of the comparison, as named in ``results.json``.
+METHODS = ("mitpiv-stb", "openlpt-stb", "mitpiv-tomo")
+
+#: Why tomographic PIV has no yield, ghost fraction or particle position error.
+TOMO_NOT_APPLICABLE = ("tomographic PIV measures window-averaged displacements of the reconstructed voxel "
+                       "intensity on a grid, not individual particles: yield, ghost fraction and particle "
+                       "position error do not apply (its velocity error is on the binned grid)")
+
+
+class CompareTable(Table):
+    """Other methods on the same images (opt-in; mitpiv.studies.kinds.tracking_compare)."""
+
+    openlpt: bool = Field(False, description="run OpenLPT's STB (PyPI openlpt) on the exported frames and score it")
+    openlpt_timeout_s: PosFloat = Field(3600.0, description="OpenLPT: time limit of its run [s]")
+    openlpt_threads: Annotated[int, Field(ge=0, le=512)] = Field(1, description="OpenLPT: threads (0: all cores)")
+    openlpt_settings: dict[str, float | int | list[int]] = Field(
+        default_factory=dict, description="OpenLPT: overrides of mitpiv.io.openlpt.OpenLPTSettings' fields (e.g. "
+                                          "finder_threshold = 20); the others follow the experiment")
+    tomo: bool = Field(False, description="tomographic PIV: MART / SMART volumes + multi-pass 3-D correlation")
+    tomo_method: Literal["mart", "smart"] = Field("mart", description="tomo: reconstruction method")
+    tomo_voxel_mm: PosFloat | None = Field(None, description="tomo: voxel [mm] (default: one pixel in object space at "
+                                                              "the box centre)")
+    tomo_iterations: Annotated[int, Field(ge=1, le=50)] = Field(5, description="tomo: MART / SMART iterations")
+    tomo_windows: Annotated[list[Window], Field(min_length=1)] = Field(
+        [32, 24, 16], description="tomo: window edge per PIV pass [voxels]")
+    tomo_overlap: Annotated[float, Field(ge=0, lt=1)] = Field(0.75, description="tomo: window overlap fraction")
+    tomo_pairs: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="tomo: consecutive frame pairs correlated, from frame 0 (default all: frames - 1)")
+
+    @model_validator(mode="after")
+    def _settings(self):
+        from dataclasses import fields
+
+        from mitpiv.io.openlpt import OpenLPTSettings
+
+        names = {f.name for f in fields(OpenLPTSettings)}
+        bad = sorted(set(self.openlpt_settings) - names)
+        if bad:
+            raise ValueError(f"openlpt_settings: unknown key(s) {bad}; OpenLPTSettings' fields are {sorted(names)}")
+        return self
+
+
+def _scale(cfg, run: Path) -> float:
+    """mm per pixel at the measurement box's centre (the true cameras)."""
+    from mitpiv.io import camera_from_metadata, read_json
+    from mitpiv.studies.kinds.tracking import bounds_of
+    from mitpiv.tracking import mm_per_px
+
+    true = [camera_from_metadata(c) for c in read_json(run / "calibrate" / "cameras.json")["true"]]
+    lo, hi = bounds_of(cfg)
+    return float(mm_per_px(true, 0.5 * (lo + hi)))
+
+
+def openlpt_settings(cfg, run: Path):
+    """The :class:`~mitpiv.io.openlpt.OpenLPTSettings` and voxel [mm] for a run (module notes)."""
+    from dataclasses import replace
+
+    from mitpiv.io.openlpt import OpenLPTSettings
+    from mitpiv.studies.kinds.tracking import _truth, bounds_of
+
+    t = cfg.tracking
+    vox = _scale(cfg, run)
+    guess = 0.0 if t.velocity_guess_mm_s is None else float(np.linalg.norm(t.velocity_guess_mm_s)) * cfg.flow.dt_s
+    search_vox = guess / vox + t.search_px
+    p0 = _truth(run)["positions_mm"][0]
+    n = max(int(np.all(np.isfinite(p0), axis=1).sum()), 1)
+    lo, hi = bounds_of(cfg)
+    spacing_mm = float(np.prod(hi - lo) / n) ** (1.0 / 3.0)
+    s = OpenLPTSettings(search_radius_vox=round(search_vox, 3), pred_search_vox=round(1.5 * search_vox, 3),
+                        tolerance_2d_px=t.tolerance_px, tolerance_3d_vox=0.5 * t.tolerance_px,
+                        neighbour_spacing_vox=round(spacing_mm / vox, 3))
+    over = {k: (tuple(v) if isinstance(v, list) else v) for k, v in cfg.compare.openlpt_settings.items()}
+    return replace(s, **over), vox
+
+
+def _null_result(reason: str, *, status: str, extra: dict | None = None) -> dict:
+    keys = ("yield", "ghost_fraction", "position_error_px", "position_error_mm", "velocity_error_rel",
+            "binned_mean_error_mm_s", "binned_error_rel", "wall_s")
+    return {"status": status, "error": reason, **{k: None for k in keys}, **(extra or {}),
+            "null_reasons": {k: reason for k in keys}}
+
+
+def stage_openlpt(ctx: StageContext) -> dict:
+    from mitpiv.errors import MitpivError
+    from mitpiv.io import write_npz
+    from mitpiv.io.openlpt import export_openlpt
+    from mitpiv.studies.export import run_images
+    from mitpiv.studies.kinds.tomo import null_metrics
+    from mitpiv.studies.kinds.tracking import bounds_of, load_cameras, score_tracks, write_tracks_npz
+    from mitpiv.tracking.peers import run_openlpt
+
+    cfg, run, c = ctx.cfg, ctx.run_dir, ctx.cfg.compare
+    cams = load_cameras(run)
+    lo, hi = bounds_of(cfg)
+    settings, vox = openlpt_settings(cfg, run)
+    folder = ctx.out / "export"
+    distorted = any(not cam.distortion.is_zero for cam in cams)
+    info = {"export_s": None, "voxel_mm": vox, "undistorted": distorted}
+    try:  # the export (a camera OpenLPT cannot represent) or the peer's run may fail
+        t0 = time.perf_counter()
+        export_openlpt(folder, run_images(run)["files"], cams, lower_mm=lo, upper_mm=hi,
+                       frame_rate_hz=1.0 / cfg.flow.dt_s, voxel_mm=vox, settings=settings, threads=c.openlpt_threads,
+                       undistort=distorted, progress=ctx.progress)
+        info["export_s"] = time.perf_counter() - t0
+        tracks, wall = run_openlpt(folder, timeout_s=c.openlpt_timeout_s)
+    except MitpivError as e:  # the peer's failure is a result: the row says why
+        import warnings
+
+        from mitpiv.errors import MitpivWarning
+
+        reason = f"OpenLPT could not run on this experiment's frames: {type(e).__name__}: {e}"
+        warnings.warn(reason, MitpivWarning, stacklevel=2)
+        return _null_result(reason, status="failed", extra=info)
+    write_tracks_npz(ctx.out / "tracks.npz", tracks)
+    sc = score_tracks(cfg, run, tracks)
+    write_npz(ctx.out / "errors.npz", {"velocity_error_mm_s": sc["velocity_error_mm_s"], **sc["binned"]},
+              owner="tracking")
+    m = {**sc["metrics"], "status": "ok", "error": "", "wall_s": wall, **info}
+    for k in ("velocity_error_rel", "binned_mean_error_mm_s", "binned_error_rel"):
+        m.setdefault(k, float("nan"))
+    return null_metrics(m, {"position_error": "OpenLPT found no particle that matches a true one",
+                            "yield": "no true particle in the measurement box",
+                            "ghost_fraction": "OpenLPT returned no track sample in the measurement box",
+                            "": "not computable from OpenLPT's tracks"}, where="openlpt compare")
+
+
+def tomo_grid(cfg, run: Path):
+    """The voxel grid of the tomographic reconstruction: the measurement box, voxels of
+    ``[compare] tomo_voxel_mm`` (default one pixel at the box centre)."""
+    from mitpiv.grid import VoxelGrid
+    from mitpiv.studies.kinds.tracking import bounds_of
+
+    lo, hi = bounds_of(cfg)
+    vox = cfg.compare.tomo_voxel_mm or _scale(cfg, run)
+    return VoxelGrid.from_bounds(tuple(lo), tuple(hi), vox)
+
+
+def bin_vectors(points_mm, velocities_mm_s, grid) -> dict:
+    """Mean velocity per voxel of ``grid`` of vectors at ``points_mm`` ((N, 3) [mm], (N, 3)
+    [mm/s]; rows with a NaN left out): ``count`` (n_z, n_y, n_x) and ``mean_mm_s``
+    (n_z, n_y, n_x, 3), NaN where empty (as :func:`mitpiv.tracking.metrics.bin_tracks`)."""
+    p = np.asarray(points_mm, float).reshape(-1, 3)
+    v = np.asarray(velocities_mm_s, float).reshape(-1, 3)
+    ok = np.all(np.isfinite(p), axis=1) & np.all(np.isfinite(v), axis=1)
+    p, v = p[ok], v[ok]
+    nz, ny, nx = grid.shape
+    ijk = np.floor((p - np.asarray(grid.origin_mm)) / np.asarray(grid.voxel_mm)).astype(np.int64)
+    inside = np.all((ijk >= 0) & (ijk < np.array([nx, ny, nz])), axis=1)
+    ijk, v = ijk[inside], v[inside]
+    flat = (ijk[:, 2] * ny + ijk[:, 1]) * nx + ijk[:, 0]
+    count = np.bincount(flat, minlength=grid.n_voxels).astype(np.float64)
+    s1 = np.stack([np.bincount(flat, weights=v[:, k], minlength=grid.n_voxels) for k in range(3)], axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = s1 / count[:, None]
+    mean[count == 0] = np.nan
+    return {"count": count.reshape(nz, ny, nx).astype(np.int64), "mean_mm_s": mean.reshape(nz, ny, nx, 3)}
+
+
+def _warm_up(images, maps, grid, method) -> None:
+    """Compile the Numba kernels of MART / SMART and of the 3-D correlation on a 16^3-voxel
+    grid at the box centre before the clock starts: a Dask worker's first call pays the
+    compilation (about 20 s on 2 cores), which is not the method's cost."""
+    from mitpiv import analysis
+    from mitpiv.grid import VoxelGrid
+    from mitpiv.reconstruct.tomo import reconstruct_volume
+
+    vox = np.asarray(grid.voxel_mm, float)
+    centre = np.asarray(grid.origin_mm, float) + 0.5 * vox * np.asarray(grid.shape[::-1])
+    small = VoxelGrid.from_bounds(tuple(centre - 8 * vox), tuple(centre + 8 * vox), tuple(vox))
+    reconstruct_volume(images, maps, small, method, iterations=1)
+    rng = np.random.default_rng(0)
+    a = rng.random(small.shape).astype(np.float32)
+    analysis.piv3d(a, np.roll(a, 1, axis=2), small, windows=[8, 8], overlap=0.5)
+
+
+def stage_tomo(ctx: StageContext) -> dict:
+    from mitpiv import analysis, costs
+    from mitpiv.io import write_npz
+    from mitpiv.reconstruct.mapping import PinholeMapping
+    from mitpiv.reconstruct.tomo import WeightCache, reconstruct_volume
+    from mitpiv.studies.kinds.tomo import null_metrics
+    from mitpiv.studies.kinds.tracking import binned_error, eulerian_grid, frame_images, load_cameras, truth_tracks
+    from mitpiv.tracking import Tracks, bin_tracks
+
+    cfg, run, c = ctx.cfg, ctx.run_dir, ctx.cfg.compare
+    n = cfg.sequence.frames
+    if n < 2:
+        raise ConfigError(f"experiment: [compare] tomo = true needs at least 2 frames (a pair to correlate); "
+                          f"[sequence] frames = {n}. Render more frames or set tomo = false.")
+    pairs = n - 1 if c.tomo_pairs is None else c.tomo_pairs
+    if pairs > n - 1:
+        raise ConfigError(f"experiment: [compare] tomo_pairs = {pairs} exceeds the {n - 1} pair(s) of [sequence] "
+                          f"frames = {n}; give at most {n - 1} or leave it out (all pairs).")
+    grid = tomo_grid(cfg, run)
+    maps = [PinholeMapping(cam) for cam in load_cameras(run)]
+    costs.check_memory(costs.reconstruction_cost(grid.n_voxels, n_images=len(maps), iterations=c.tomo_iterations,
+                                                 method=c.tomo_method),
+                       what=f"[compare] tomo on {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]} voxels",
+                       fix="set [compare] tomo_voxel_mm larger or [tracking] bounds_mm smaller")
+    costs.check_memory(costs.piv_cost(grid.shape, c.tomo_windows, c.tomo_overlap),
+                       what=f"[compare] tomo_windows = {list(c.tomo_windows)}, tomo_overlap = {c.tomo_overlap}",
+                       fix="use a smaller overlap or larger windows")
+    tw = time.perf_counter()
+    _warm_up(frame_images(run, 0)[0], maps, grid, c.tomo_method)
+    warm_s = time.perf_counter() - tw
+    t0 = time.perf_counter()
+    cache = WeightCache()
+    recon_s = piv_s = 0.0
+    pts, vels, valid, residual = [], [], [], []
+    prev = None
+    for f in range(pairs + 1):
+        ta = time.perf_counter()
+        vol, inf = reconstruct_volume(frame_images(run, f)[0], maps, grid, c.tomo_method,
+                                      iterations=c.tomo_iterations, progress=ctx.progress, cache=cache)
+        recon_s += time.perf_counter() - ta
+        if inf.get("residuals"):
+            residual.append(float(np.ravel(inf["residuals"])[-1]))
+        if prev is not None:
+            tb = time.perf_counter()
+            fld = analysis.piv3d(prev, vol, grid, windows=c.tomo_windows, overlap=c.tomo_overlap, dt_s=cfg.flow.dt_s,
+                                 progress=ctx.progress)
+            piv_s += time.perf_counter() - tb
+            v = np.stack([fld.u, fld.v, fld.w], axis=-1).reshape(-1, 3)
+            ok = (fld.valid & ~(fld.outlier & ~fld.replaced)).reshape(-1)
+            v[~ok] = np.nan
+            pts.append(fld.points_mm().reshape(-1, 3))
+            vels.append(v)
+            valid.append(float(ok.mean()))
+        prev = vol
+    wall = time.perf_counter() - t0
+    egrid = eulerian_grid(cfg)
+    found = bin_vectors(np.concatenate(pts), np.concatenate(vels), egrid)
+    tt = truth_tracks(run)  # the truth over the frames the pairs span
+    k = pairs + 1
+    ref = bin_tracks(Tracks(tt.positions_mm[:, :k], tt.intensities[:, :k], tt.dt_s, tt.velocities_mm_s[:, :k]), egrid)
+    m = {"status": "ok", "error": "", **binned_error(found["mean_mm_s"], found["count"], ref["mean_mm_s"],
+                                                       ref["count"]),
+         "yield": None, "ghost_fraction": None, "position_error_px": None, "position_error_mm": None,
+         "wall_s": wall, "reconstruction_s": recon_s, "piv_s": piv_s, "warm_up_s": warm_s, "pairs": pairs,
+         "voxels": list(grid.shape[::-1]), "voxel_mm": list(map(float, grid.voxel_mm)),
+         "method": c.tomo_method, "valid_fraction": float(np.mean(valid)),
+         "mart_residual": float(np.mean(residual)) if residual else None}
+    m["velocity_error_rel"] = m["binned_error_rel"]
+    write_npz(ctx.out / "binned.npz", {"bin_count": found["count"], "bin_mean_mm_s": found["mean_mm_s"],
+                                       "bin_true_mean_mm_s": ref["mean_mm_s"],
+                                       "bin_origin_mm": np.asarray(egrid.origin_mm, float),
+                                       "bin_voxel_mm": np.asarray(egrid.voxel_mm, float)}, owner="tracking")
+    out = null_metrics(m, {"binned": "no PIV vector fell in a bin that the true trajectories fill",
+                           "velocity_error_rel": "no PIV vector fell in a bin that the true trajectories fill",
+                           "": "not computable"}, where="tomo compare")
+    # by definition, not a missing value: no warning
+    na = {k: TOMO_NOT_APPLICABLE for k in ("yield", "ghost_fraction", "position_error_px", "position_error_mm")}
+    out["null_reasons"] = {**na, **out.get("null_reasons", {})}
+    return out
+
+
+def stages(cfg) -> list[Stage]:
+    """The opt-in comparison stages of a tracking experiment (none without ``[compare]``)."""
+    c = cfg.compare
+    out = []
+    if c.openlpt:
+        out.append(Stage("openlpt", ("compare",), stage_openlpt, packages=("openlpt",)))
+    if c.tomo:
+        out.append(Stage("tomo", ("compare",), stage_tomo))
+    return out
+
+
+def summary(results: dict) -> dict:
+    """The comparison's part of a tracking run's metrics.json: per method its result."""
+    return {k: results[k] for k in ("openlpt", "tomo") if results.get(k) is not None}
+
+
+__all__ = ["CompareTable", "METHODS", "TOMO_NOT_APPLICABLE", "openlpt_settings", "tomo_grid", "bin_vectors",
+           "stage_openlpt", "stage_tomo", "stages", "summary"]

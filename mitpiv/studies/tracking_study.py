@@ -1,0 +1,183 @@
+"""The tracking comparison study (issue 27, item 7): a ``mitpiv sweep`` of a tracking
+experiment with ``[compare] openlpt = true, tomo = true`` over particles per pixel, turned into
+``results.json`` (one row per method and density) and one figure per metric against ppp.
+
+    mitpiv sweep scenes/tracking_lpt/study.toml --out out/tracking_ppp --tracking-results docs/studies/tracking
+
+(``--tracking-results`` on a finished sweep folder reruns nothing and only writes the files.)
+
+Rows (``results.json`` ``rows``; every metric is ``null`` with its reason in ``null_reasons``
+where it has no value):
+
+``method``
+    ``mitpiv-stb`` (the track stage), ``openlpt-stb`` (the openlpt stage),
+    ``mitpiv-tomo`` (the tomo stage); a method that was not run at a point has no row there.
+``ppp``
+    the swept ``seeding.ppp`` (the nominal density), else the measured one; ``ppp_measured``:
+    particles in the box that the first camera sees, per pixel, at frame 0.
+``yield``, ``ghost_fraction``, ``position_error_px``
+    the LPT Challenge's definitions (:mod:`mitpiv.tracking.metrics`), the same match radius
+    for both trackers; ``null`` for tomographic PIV, where they do not apply
+    (:data:`~mitpiv.studies.kinds.tracking_compare.TOMO_NOT_APPLICABLE`).
+``velocity_error``
+    for all three methods on the same Eulerian grid (``[evaluate] bin_mm``): the RMS over the
+    bins of the difference between the method's mean velocity and the binned truth's,
+    divided by the RMS of the true bin means (``velocity_error_mm_s``: not divided);
+    ``track_velocity_error``: the trackers' per-particle error relative to the RMS speed.
+``wall_s``
+    seconds of the method's own work: mitpiv STB the otf and track stages; OpenLPT its run
+    (without the export, ``export_s``); tomo its reconstructions and correlations. The
+    render and calibrate stages that all three share are not counted.
+``status``, ``error``
+    ``ok``, or ``failed`` with the exact reason (e.g. OpenLPT's exit status and log).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from mitpiv.errors import FileFormatError
+
+__all__ = ["study_rows", "write_tracking_study", "METRICS"]
+
+#: The metrics plotted against ppp: (column, axis label, log scale).
+METRICS = (("yield", "yield", False), ("ghost_fraction", "ghost fraction", False),
+           ("position_error_px", "position error [px]", True),
+           ("velocity_error", "binned velocity error (of the RMS bin speed)", True),
+           ("wall_s", "wall time [s]", True))
+
+
+def _v(x):
+    """A finite number, a string or None (pandas' NaN and numpy scalars cleaned)."""
+    if x is None or isinstance(x, str | bool):
+        return x
+    try:
+        f = float(x)
+    except (TypeError, ValueError):
+        return None
+    if not math.isfinite(f):
+        return None
+    return int(f) if isinstance(x, int) else f
+
+
+def _row(method, ppp, ppp_measured, values: dict, *, status, error, reasons) -> dict:
+    out = {"method": method, "ppp": ppp, "ppp_measured": ppp_measured}
+    for k in ("yield", "ghost_fraction", "position_error_px", "velocity_error", "velocity_error_mm_s",
+              "track_velocity_error", "binned_coverage", "wall_s"):
+        out[k] = _v(values.get(k))
+    out.update(status=status, error=error or "")
+    nulls = {k: (reasons.get(k) or error or "not computed") for k in out if out[k] is None and k != "error"}
+    if nulls:
+        out["null_reasons"] = nulls
+    return out
+
+
+def study_rows(table) -> list[dict]:
+    """The rows of ``results.json`` from a sweep table (a pandas DataFrame or a list of row
+    dicts, as ``mitpiv sweep`` records them): per point, one row per method that ran."""
+    records = table.to_dict("records") if hasattr(table, "to_dict") else list(table)
+    rows = []
+    for r in records:
+        get = lambda k, r=r: _v(r.get(k))  # noqa: E731
+        ppp = get("param.seeding.ppp")
+        ppp = ppp if ppp is not None else get("ppp")
+        if r.get("status") != "ok":
+            err = f"the sweep point failed: {r.get('error')}"
+            for m in ("mitpiv-stb",) + tuple(x for x, c in (("openlpt-stb", "param.compare.openlpt"),
+                                                            ("mitpiv-tomo", "param.compare.tomo")) if r.get(c)):
+                rows.append(_row(m, ppp, None, {}, status="failed", error=err, reasons={}))
+            continue
+        measured = get("ppp")
+        secs = [get("seconds.otf"), get("seconds.track")]
+        rows.append(_row("mitpiv-stb", ppp, measured, {
+            "yield": get("yield"), "ghost_fraction": get("ghost_fraction"), "position_error_px": get("position_error_px"),
+            "velocity_error": get("binned_error_rel"), "velocity_error_mm_s": get("binned_mean_error_mm_s"),
+            "track_velocity_error": get("velocity_error_rel"), "binned_coverage": get("binned_coverage"),
+            "wall_s": sum(secs) if None not in secs else None}, status="ok", error="", reasons={}))
+        if r.get("openlpt.status") is not None and not (isinstance(r.get("openlpt.status"), float)):
+            ok = r["openlpt.status"] == "ok"
+            rows.append(_row("openlpt-stb", ppp, measured, {
+                "yield": get("openlpt.yield"), "ghost_fraction": get("openlpt.ghost_fraction"),
+                "position_error_px": get("openlpt.position_error_px"), "velocity_error": get("openlpt.binned_error_rel"),
+                "velocity_error_mm_s": get("openlpt.binned_mean_error_mm_s"),
+                "track_velocity_error": get("openlpt.velocity_error_rel"),
+                "binned_coverage": get("openlpt.binned_coverage"), "wall_s": get("openlpt.wall_s")},
+                status="ok" if ok else "failed", error="" if ok else str(r.get("openlpt.error")), reasons={}))
+        if r.get("tomo.status") is not None and not (isinstance(r.get("tomo.status"), float)):
+            from mitpiv.studies.kinds.tracking_compare import TOMO_NOT_APPLICABLE
+
+            ok = r["tomo.status"] == "ok"
+            na = {k: TOMO_NOT_APPLICABLE for k in ("yield", "ghost_fraction", "position_error_px")}
+            na["track_velocity_error"] = "tomographic PIV has no particle tracks"
+            rows.append(_row("mitpiv-tomo", ppp, measured, {
+                "velocity_error": get("tomo.binned_error_rel"), "velocity_error_mm_s": get("tomo.binned_mean_error_mm_s"),
+                "binned_coverage": get("tomo.binned_coverage"), "wall_s": get("tomo.wall_s")},
+                status="ok" if ok else "failed", error="" if ok else str(r.get("tomo.error")), reasons=na))
+    return sorted(rows, key=lambda x: (x["method"], -1.0 if x["ppp"] is None else x["ppp"]))
+
+
+def _read_table(sweep_dir: Path):
+    import pandas as pd
+
+    for name, reader in (("results.parquet", pd.read_parquet), ("results.csv", pd.read_csv)):
+        if (sweep_dir / name).is_file():
+            return reader(sweep_dir / name)
+    raise FileFormatError(f"tracking study: {str(sweep_dir)!r} holds no sweep table (results.parquet / results.csv); "
+                          f"run 'mitpiv sweep scenes/tracking_lpt/study.toml --out {sweep_dir}' first.")
+
+
+def _plot(rows, metric, label, log, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mitpiv.io.figures import save_figure
+
+    fig, ax = plt.subplots(figsize=(5.0, 3.6))
+    drawn = 0
+    for method, marker in zip(("mitpiv-stb", "openlpt-stb", "mitpiv-tomo"), "osd", strict=True):
+        pts = sorted((r["ppp"], r[metric]) for r in rows if r["method"] == method and r["ppp"] is not None
+                     and r[metric] is not None)
+        if pts:
+            ax.plot(*zip(*pts, strict=True), marker=marker, label=method)
+            drawn += 1
+    ax.set_xscale("log")
+    if log and drawn:
+        ax.set_yscale("log")
+    ax.set_xlabel("particles per pixel (ppp)")
+    ax.set_ylabel(label)
+    if metric == "yield":
+        ax.set_ylim(0, 1.02)
+    elif metric == "ghost_fraction":
+        ax.set_ylim(bottom=0)
+    ax.grid(True, which="both", alpha=0.3)
+    if drawn:
+        ax.legend()
+    else:
+        ax.text(0.5, 0.5, "no values", transform=ax.transAxes, ha="center")
+    fig.tight_layout()
+    save_figure(fig, path, dpi=100)
+
+
+def write_tracking_study(sweep_dir, out_dir) -> dict:
+    """Write ``results.json`` and ``<metric>.png`` per metric of :data:`METRICS` from a sweep
+    folder (``mitpiv sweep`` of a tracking experiment, with or without ``[compare]``).
+
+    Returns the JSON written: ``sweep`` (the folder), ``definitions`` (the columns' meaning),
+    ``rows`` (:func:`study_rows`) and ``figures`` (file names).
+    """
+    from mitpiv.io import write_json
+
+    sweep = Path(sweep_dir)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = study_rows(_read_table(sweep))
+    figures = []
+    for metric, label, log in METRICS:
+        _plot(rows, metric, label, log, out / f"{metric}.png")
+        figures.append(f"{metric}.png")
+    doc = {"sweep": str(sweep), "definitions": __doc__.split("Rows")[1].strip(), "rows": rows, "figures": figures}
+    write_json(out / "results.json", doc)
+    return doc
