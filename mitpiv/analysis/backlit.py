@@ -254,24 +254,40 @@ def hybrid_detect(stack, z_mm, *, background=None, threshold: float = 0.5, min_a
 
     from mitpiv.analysis.particles import gauss3_offset as _gauss3
 
-    st = np.asarray(stack, dtype=np.float64)
+    # The stack (and a background stack) are read one plane at a time, in float64 per plane:
+    # a memory-mapped stack (lightfield.focal_stack(out=...)) never has to fit in memory.
+    st = stack if isinstance(stack, np.ndarray) else np.asarray(stack)
     z = np.asarray(z_mm, dtype=np.float64).reshape(-1)
     if st.ndim != 3 or st.shape[0] != z.size or z.size < 1:
         raise ConfigError(f"hybrid_detect: stack must be (n_z, H, W) with one depth per plane; got stack {st.shape} "
                           f"and {z.size} depths.")
-    if not np.all(np.isfinite(st)):
-        raise ConfigError("hybrid_detect: the stack holds NaN or infinite values.")
     if z.size > 1 and not (np.all(np.diff(z) > 0) or np.all(np.diff(z) < 0)):
         raise ConfigError("hybrid_detect: z_mm must be strictly monotonic.")
     if not (0.0 < threshold < 1.0):
         raise ConfigError(f"hybrid_detect: threshold must be a darkness in (0, 1), got {threshold!r}.")
-    bg = np.median(st) if background is None else np.asarray(background, dtype=np.float64)
+    bg = np.median(st) if background is None else (background if isinstance(background, np.ndarray)
+                                                   else np.asarray(background, dtype=np.float64))
     bg = np.broadcast_to(bg, st.shape)
-    covered = bg > 1e-6 * float(np.max(bg)) if np.max(bg) > 0 else np.zeros(st.shape, bool)
-    if not covered.any():
+    bg_max = float(np.max(bg))
+
+    def trans_plane(k):
+        """Transmittance of plane k (float64): the plane over the background where it is lit."""
+        s_k = np.asarray(st[k], dtype=np.float64)
+        b_k = np.asarray(bg[k], dtype=np.float64)
+        cov = b_k > 1e-6 * bg_max if bg_max > 0 else np.zeros(b_k.shape, bool)
+        return np.where(cov, s_k / np.where(cov, b_k, 1.0), 1.0), cov, s_k
+
+    t_min = None
+    any_covered = False
+    for k in range(z.size):
+        t_k, cov, s_k = trans_plane(k)
+        if not np.all(np.isfinite(s_k)):
+            raise ConfigError("hybrid_detect: the stack holds NaN or infinite values.")
+        any_covered |= bool(cov.any())
+        t_min = t_k if t_min is None else np.minimum(t_min, t_k)
+    if not any_covered:
         raise ConfigError("hybrid_detect: the background is zero everywhere; pass the stack of the empty scene.")
-    trans = np.where(covered, st / np.where(covered, bg, 1.0), 1.0)
-    dark = np.clip(1.0 - trans.min(axis=0), 0.0, 1.0)
+    dark = np.clip(1.0 - t_min, 0.0, 1.0)
     mask = dark > threshold
     labels, n = _split_touching(mask, min_separation_px) if split_touching else ndimage.label(mask)
     empty = np.zeros(0)
@@ -299,8 +315,8 @@ def hybrid_detect(stack, z_mm, *, background=None, threshold: float = 0.5, min_a
     ids, seeds = ids[own], seeds[own]
     if ids.size == 0:
         return nothing
-    per = np.stack([_plane_silhouettes(trans[k], threshold, seeds, tenengrad(trans[k]), rows, cols)
-                    for k in range(z.size)])  # (n_z, 8, N)
+    per = np.stack([_plane_silhouettes(t_k, threshold, seeds, tenengrad(t_k), rows, cols)
+                    for t_k in (trans_plane(k)[0] for k in range(z.size))])  # (n_z, 10, N)
     sharp = per[:, 0, :]
     found = sharp.max(axis=0) > 0
     k = np.argmax(sharp, axis=0)

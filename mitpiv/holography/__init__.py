@@ -174,7 +174,7 @@ def _disk_transmittance(shape, x0, y0, dx, centres, radii, phase_index, wl, batc
 def record(particles, diameters_mm=None, *, sensor_z_mm: float, wavelength_nm: float = 532.0, pixel_um: float = 5.5,
            resolution=(1024, 1024), centre_xy_mm=(0.0, 0.0), oversample: int = 2, guard_mm: float | None = None,
            phase_index: float | None = None, plane_tolerance_mm: float = 0.0, sensor=None, seed: int = 0,
-           progress: Progress = None) -> Hologram:
+           phase_screens=None, progress: Progress = None) -> Hologram:
     """Record the in-line hologram of a particle field.
 
     particles : (N, 3) positions [mm] (with ``diameters_mm``) or a dict with
@@ -191,8 +191,16 @@ def record(particles, diameters_mm=None, *, sensor_z_mm: float, wavelength_nm: f
         (0: one plane per distinct z, exact for thin disks).
     sensor : optional :class:`mitpiv.imaging.SensorModel` (bit depth, noise) applied to
         the pixel intensities.
+    phase_screens : optional sequence of ``(z_mm, phase)`` with ``phase(x_mm, y_mm)`` the
+        phase [rad] a thin refractive-index disturbance adds at plane ``z_mm`` (e.g. the
+        projected optical path of shock waves, :func:`mitpiv.physics.shocks.shock_phase`),
+        called on the simulation grid ((ny, nx) arrays of sample centres); applied as
+        ``exp(i phase)`` in z order with the particle planes (before the sensor).
     """
     pos, d = _particles(particles, diameters_mm)
+    screens = sorted(((float(zs_), fn) for zs_, fn in (phase_screens or ())), key=lambda e: e[0])
+    if screens and (not all(callable(fn) for _, fn in screens) or screens[-1][0] >= float(sensor_z_mm)):
+        raise ConfigError("record: phase_screens must be (z_mm, callable) pairs with z_mm < sensor_z_mm.")
     if np.ndim(resolution) != 1 or len(resolution) != 2:
         raise ConfigError(f"record: resolution must be (width, height) in pixels, got {resolution!r}.")
     W, H = (int(v) for v in resolution)
@@ -241,17 +249,25 @@ def record(particles, diameters_mm=None, *, sensor_z_mm: float, wavelength_nm: f
     groups = np.split(np.arange(pos.shape[0]), brk) if pos.shape[0] else []
     t0 = time.perf_counter()
     z_here = None
-    for idx in track(groups, desc="hologram: planes", progress=progress, unit="plane"):
-        zp = float(pos[idx, 2].mean())
-        if z_here is not None:
+    events = sorted([(float(pos[idx, 2].mean()), 0, k) for k, idx in enumerate(groups)]
+                    + [(zq, 1, k) for k, (zq, _) in enumerate(screens)])
+    if screens:
+        gx = x0 + np.arange(nx) * dx
+        gy = y0 + np.arange(ny) * dx
+    for zp, kind, k in track(events, desc="hologram: planes", progress=progress, unit="plane"):
+        if z_here is not None and zp != z_here:
             u = propagate(u, zp - z_here, pixel_um=dx * 1e3, wavelength_nm=wavelength_nm, pad=False)
-        u *= _disk_transmittance((ny, nx), x0, y0, dx, pos[idx, :2], d[idx] / 2, phase_index, wl)
+        if kind == 0:
+            idx = groups[k]
+            u *= _disk_transmittance((ny, nx), x0, y0, dx, pos[idx, :2], d[idx] / 2, phase_index, wl)
+        else:
+            u *= np.exp(1j * np.asarray(screens[k][1](gx[None, :], gy[:, None]), dtype=np.float64))
         z_here = zp
     if z_here is not None:
         u = propagate(u, zs - z_here, pixel_um=dx * 1e3, wavelength_nm=wavelength_nm, pad=False)
     inten = np.abs(u[g:g + H * oversample, g:g + W * oversample]) ** 2
     img = inten.reshape(H, oversample, W, oversample).mean(axis=(1, 3))
-    info = {"planes": len(groups), "grid": [nx, ny], "guard_mm": g * dx, "oversample": int(oversample),
+    info = {"planes": len(groups), "phase_screens": len(screens), "grid": [nx, ny], "guard_mm": g * dx, "oversample": int(oversample),
             "critical_distance_mm": zc, "seconds": time.perf_counter() - t0, "n_particles": int(pos.shape[0])}
     log.debug("record: %d particles in %d planes on a %dx%d grid, %.1f s", info["n_particles"], len(groups), nx, ny,
               info["seconds"])

@@ -47,9 +47,10 @@ import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
 from mitpiv.physics.camera import on_sensor
+from mitpiv.physics.distortion import Distortion, distort, distort_jacobian, fold_radius, undistort
 
-__all__ = ["PlenopticCamera", "PRESETS", "preset", "thin_lens_image_distance", "alpha_from_z_geom", "dof_limits_geom",
-           "depth_resolution_geom", "ltpr"]
+__all__ = ["PlenopticCamera", "PRESETS", "preset", "PAPER_003", "paper_003_camera", "thin_lens_image_distance",
+           "alpha_from_z_geom", "dof_limits_geom", "depth_resolution_geom", "ltpr"]
 
 _OWNER = "plenoptic"
 
@@ -72,6 +73,57 @@ for _n in (800, 1600):
         PRESETS[f"lfpiv_hex_{_n}_pmr{_pmr}"] = dict(
             resolution=(_n, _n), pixel_pitch_um=5.5, focal_length_mm=50.0, f_number=2.8, focus_distance_mm=250.0,
             mla_pitch_um=5.5 * _pmr, mla_focal_length_um=None, mla_layout="hex", mla_count=None)
+
+
+#: The plenoptic camera of the plenoptic-vs-DIH drop-fragment study (seed paper 003, ch. II.B
+#: and IV): Imperx B6640 / KAI-29050 CCD, 6600 x 4400 px of 5.5 um; 471 x 362 hexagonally
+#: arranged lenslets of 77 um pitch ("about 14 pixels across") about 308 um from the sensor
+#: (taken as the lenslet focal length and gap: f/4 lenslets); 105 mm Nikon macro main lens.
+#: The magnification is the one that reproduces both ends of the paper's alpha range through
+#: its eq. 11 (drop impact: alpha 0.914-1.139 for +-30 mm -> |M| = 0.8235, a 44.1 x 29.4 mm
+#: field, the paper's "about 29.5 x 43.7 mm"; pellets: 0.923-1.259 for +-200 mm -> |M| =
+#: 0.2829, 128.3 x 85.5 mm, the paper's "86 x 127 mm"). The paper does not state the
+#: aperture: f/2.8, the lens's widest, for the drop impact (its f-number-matched value, f/2.19
+#: at this magnification, is beyond the lens; the lenslet images underfill to ~11 px); for
+#: the pellets the lens is stopped down to the matched f/3.12 (f/2.8 would overfill the
+#: lenslets at |M| = 0.28). Keys: "drop_impact", "pellets".
+PAPER_003: dict[str, dict] = {}
+for _case, _m, _n in (("drop_impact", 0.8235, 2.8), ("pellets", 0.2829, 4.0 / 1.2829)):
+    PAPER_003[_case] = dict(resolution=(6600, 4400), pixel_pitch_um=5.5, focal_length_mm=105.0, f_number=_n,
+                            focus_distance_mm=105.0 * (1.0 + _m) / _m, mla_pitch_um=77.0, mla_focal_length_um=308.0,
+                            mla_layout="hex", mla_count=(471, 362))
+    PRESETS[f"paper003_{_case}"] = PAPER_003[_case]
+
+
+def paper_003_camera(case: str = "drop_impact", *, crop_px: tuple[int, int] | None = None,
+                     distortion: Distortion | None = None, **overrides) -> PlenopticCamera:
+    """The seed paper 003 plenoptic camera (:data:`PAPER_003`), optionally cropped.
+
+    Parameters
+    ----------
+    case : "drop_impact" | "pellets"
+        The focus (field of view) of the experiment.
+    crop_px : (int, int), optional
+        A centred crop of the sensor, (width, height) [px]: every optical parameter stays
+        the paper's; the lenslet array fills the crop (quick runs: a 29 MP raw image and its
+        1000-plane stack do not fit in memory at once).
+    distortion : Distortion, optional
+        Radial distortion of the main lens (see :class:`PlenopticCamera`).
+    overrides
+        Any other :class:`PlenopticCamera` field.
+    """
+    if case not in PAPER_003:
+        raise ConfigError(f"paper_003_camera: 'case' must be one of {sorted(PAPER_003)}, got {case!r}.")
+    kw = dict(PAPER_003[case])
+    if crop_px is not None:
+        cw, ch = (int(v) for v in crop_px)
+        if not (2 <= cw <= 6600 and 2 <= ch <= 4400):
+            raise ConfigError(f"paper_003_camera: 'crop_px' must be (width, height) within 6600 x 4400 px, got {crop_px!r}.")
+        kw.update(resolution=(cw, ch), mla_count=None)
+    if distortion is not None:
+        kw["distortion"] = distortion
+    kw.update(overrides)
+    return PlenopticCamera(**kw)
 
 
 def preset(name: str, **overrides) -> PlenopticCamera:
@@ -118,6 +170,23 @@ class PlenopticCamera:
         MLA-to-sensor distance; default the lenslet focal length.
     to_world_mitsuba : (4, 4) array
         Camera pose (Mitsuba convention), main-lens centre at the translation.
+    distortion : Distortion, optional
+        Radial (Brown-Conrady k1, k2, k3; no tangential terms) distortion of the main lens,
+        a property of the lens, so every ray through it is bent: a ray leaving an object
+        point with object-side tangent ``t = (P - a)_xy / (P - a)_z`` (through lens point
+        ``a``) is refracted as the ideal thin lens refracts the tangent
+        ``t R(|t|^2)``, ``R = 1 + k1 r^2 + k2 r^4 + k3 r^6`` (the distortion of
+        :mod:`mitpiv.physics.distortion` on the normalised coordinates ``t``). For the chief
+        ray (``a = 0``) ``t`` is the point's normalised image coordinate, so its image moves
+        radially by the model's amount, ``r -> r R(r^2)``, exactly as in a distorted pinhole
+        camera; rays through other lens points see the same map of their own tangent. Over
+        a symmetric aperture the bundle's centroid bends exactly as the chief ray (the
+        cubic term) plus a uniform magnification change ``2 k1 <|a/z|^2>``; the same
+        term is a spherical-aberration-like focus shift and blur (the paper's drop-impact
+        camera at ``k1 = 0.3``: best focus of the ray bundle 0.30 mm nearer on the axis, a
+        rendered dot card's sharpest plane 0.15 mm), which a dot-card dewarp absorbs as the
+        real lens's would be. Camera tracing inverts the map (Newton,
+        :func:`~mitpiv.physics.distortion.undistort`).
     """
 
     resolution: tuple[int, int]
@@ -134,8 +203,22 @@ class PlenopticCamera:
     mla_offset_um: tuple[float, float] = (0.0, 0.0)
     mla_gap_um: float | None = None
     to_world_mitsuba: np.ndarray = field(default_factory=lambda: np.eye(4))
+    distortion: Distortion = field(default_factory=Distortion)
 
     def __post_init__(self) -> None:
+        if isinstance(self.distortion, dict):
+            self.distortion = Distortion(**self.distortion)
+        if self.distortion is None:
+            self.distortion = Distortion()
+        if not isinstance(self.distortion, Distortion):
+            raise ConfigError(f"{_OWNER}: 'distortion' must be a mitpiv.physics.distortion.Distortion, got "
+                              f"{type(self.distortion).__name__}.")
+        if self.distortion.has_tangential:
+            raise ConfigError(f"{_OWNER}: the main-lens distortion is radial only (k1, k2, k3); got p1={self.distortion.p1}, "
+                              f"p2={self.distortion.p2}. Set p1 = p2 = 0.")
+        for k in ("k1", "k2", "k3"):
+            if not math.isfinite(getattr(self.distortion, k)):
+                raise ConfigError(f"{_OWNER}: distortion {k} must be finite, got {getattr(self.distortion, k)!r}.")
         w, h = (int(v) for v in self.resolution)
         if w != self.resolution[0] or h != self.resolution[1] or w < 2 or h < 2:
             raise ConfigError(f"{_OWNER}: 'resolution' must be two integers >= 2, got {self.resolution!r}.")
@@ -454,6 +537,7 @@ class PlenopticCamera:
             "lattice_origin_mm": self.origin_mm.tolist(),
             "crosstalk_offsets": [list(o) for o in self.crosstalk_offsets()],
             "to_world_mitsuba": self.to_world_mitsuba.tolist(),
+            "distortion": self.distortion.to_dict(),
         }
 
     @classmethod
@@ -465,6 +549,7 @@ class PlenopticCamera:
             mla_layout=d["mla_layout"], mla_count=tuple(d["mla_count"]), mla_rotation_deg=d["mla_rotation_deg"],
             mla_offset_um=tuple(d["mla_offset_um"]), mla_gap_um=d["mla_gap_um"],
             to_world_mitsuba=np.asarray(d["to_world_mitsuba"]),
+            distortion=Distortion(**d.get("distortion", {})),
         )
 
     # ------------------------------------------------------------------ rays (float64)
@@ -487,6 +572,21 @@ class PlenopticCamera:
     def lenslet_exists(self, i, j) -> np.ndarray:
         col, row = self.axial_to_storage(i, j)
         return (col >= 0) & (col < self.mla_count[0]) & (row >= 0) & (row < self.mla_count[1])
+
+    def image_side_tangents(self, p_local_mm, lens_xy_mm) -> np.ndarray:
+        """Image-side tangents (..., 2) of rays from camera-local points (..., 3) through
+        main-lens points (..., 2) [mm]: the thin lens ``t -> t - a/f`` applied to the
+        (distorted, see ``distortion``) tangent of the ray into the camera. A ray crosses
+        the plane ``s`` behind the lens at ``a + s t`` (the MLA at ``s_i``, a refocus plane
+        at ``alpha s_i``)."""
+        p = np.asarray(p_local_mm, dtype=float)
+        a = np.asarray(lens_xy_mm, dtype=float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (a - p[..., :2]) / p[..., 2:3]  # tangent per unit distance travelled into the camera
+        if not self.distortion.is_zero:  # the lens refracts the distorted object-side tangent
+            tx, ty = distort(-t1[..., 0], -t1[..., 1], self.distortion)
+            t1 = -np.stack([tx, ty], axis=-1)
+        return t1 - a / self.focal_length_mm
 
     def trace_to_sensor(self, p_local_mm, lens_xy_mm) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Light rays from camera-local points through main-lens points to the sensor (float64).
@@ -514,11 +614,9 @@ class PlenopticCamera:
         """
         p = np.asarray(p_local_mm, dtype=float)
         a = np.asarray(lens_xy_mm, dtype=float)
-        si, g, f = self.image_distance_mm, self.gap_mm, self.focal_length_mm
+        si, g = self.image_distance_mm, self.gap_mm
         fm = self.mla_focal_length_um * 1e-3
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t1 = (a - p[..., :2]) / p[..., 2:3]  # tangent per unit distance travelled into the camera
-        t2 = t1 - a / f
+        t2 = self.image_side_tangents(p, a)
         xm = a + si * t2
         i, j = self.nearest_lenslet(xm)
         b = self.basis_mm
@@ -556,6 +654,9 @@ class PlenopticCamera:
         lens = c + d + si * t2
         inside = np.sum(lens * lens, axis=-1) <= self.aperture_radius_mm**2
         t3 = t2 - lens / f
+        if not self.distortion.is_zero:  # object-side tangent whose distorted image is t3
+            tx, ty = undistort(t3[..., 0], t3[..., 1], self.distortion, iterations=12)
+            t3 = np.stack([tx, ty], axis=-1)
         m = self.to_world_mitsuba
         origins = m[:3, 3] + np.concatenate([lens, np.zeros(lens.shape[:-1] + (1,))], axis=-1) @ m[:3, :3].T
         dirs = np.concatenate([t3, np.ones(t3.shape[:-1] + (1,))], axis=-1) @ m[:3, :3].T
@@ -588,6 +689,9 @@ class PlenopticCamera:
         q = self.world_to_local(p_world_mm)
         with np.errstate(divide="ignore", invalid="ignore"):
             t = -q[..., :2] / q[..., 2:3]
+        if not self.distortion.is_zero:  # the chief ray's tangent through the distorting lens
+            tx, ty = distort(t[..., 0], t[..., 1], self.distortion)
+            t = np.stack([tx, ty], axis=-1)
         w, h = self.resolution
         return t * self.chief_ray_scale_px + np.array([w / 2.0, h / 2.0])
 
@@ -597,9 +701,15 @@ class PlenopticCamera:
 
     def visible(self, p_world_mm) -> np.ndarray:
         """Points (..., 3) [mm] in front of the main lens whose image point
-        (:meth:`project`) lands on the sensor ``[0, W) x [0, H)``, shape (...)."""
-        with np.errstate(invalid="ignore", over="ignore"):
-            return self.in_front(p_world_mm) & on_sensor(self.project(p_world_mm), self.resolution)
+        (:meth:`project`) lands on the sensor ``[0, W) x [0, H)``, shape (...); with a
+        distorting main lens also inside the radial map's invertible branch
+        (:func:`~mitpiv.physics.distortion.fold_radius`)."""
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            ok = self.in_front(p_world_mm) & on_sensor(self.project(p_world_mm), self.resolution)
+            if not self.distortion.is_zero:
+                q = self.world_to_local(p_world_mm)
+                ok &= np.hypot(q[..., 0], q[..., 1]) / q[..., 2] < fold_radius(self.distortion)
+            return ok
 
     def jacobian(self, p_world_mm) -> np.ndarray:
         """``d(u, v)/d(x, y, z)`` of :meth:`project`, shape (..., 2, 3) [px/mm] (analytic)."""
@@ -611,6 +721,11 @@ class PlenopticCamera:
         d[..., 0, 2] = k * q[..., 0] / (z * z)
         d[..., 1, 1] = -k / z
         d[..., 1, 2] = k * q[..., 1] / (z * z)
+        if not self.distortion.is_zero:  # radial map of t = -(x, y)/z: chain rule
+            with np.errstate(divide="ignore", invalid="ignore"):
+                _, _, ja, jb, jc, je = distort_jacobian(-q[..., 0] / z, -q[..., 1] / z, self.distortion)
+            jac = np.stack([np.stack([ja, jb], -1), np.stack([jc, je], -1)], -2)
+            d = jac @ d
         # q = (p - t) R  ->  dq/dp = R^T
         return d @ self.to_world_mitsuba[:3, :3].T
 

@@ -217,4 +217,5 @@ def test_bad_parameters(props, match):
 
 
 def test_presets_are_complete():
-    assert set(PRESETS) == {"lytro_like", "multiplenoptic_paper"} | {f"lfpiv_hex_{n}_pmr{p}" for n in (800, 1600) for p in (7, 14, 28)}
+    assert set(PRESETS) == ({"lytro_like", "multiplenoptic_paper", "paper003_drop_impact", "paper003_pellets"}
+                            | {f"lfpiv_hex_{n}_pmr{p}" for n in (800, 1600) for p in (7, 14, 28)})

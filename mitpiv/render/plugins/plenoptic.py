@@ -48,6 +48,14 @@ sensor resolution; use a ``box`` reconstruction filter (a pixel integrates its o
      - deg, um
      - 0, 0, 0, lenslet focal length
      - Misalignment of the array and its distance to the sensor.
+   * - k1, k2, k3
+     - float
+     - --
+     - 0
+     - Radial distortion of the main lens (Brown-Conrady on the object-side ray tangent;
+       :class:`mitpiv.physics.plenoptic.PlenopticCamera`, ``distortion``). The pixel weights
+       stay those of the undistorted lens (the distortion moves light; the irradiance change,
+       ``O(k1 r^2)``, is not modelled).
    * - crosstalk_sample_fraction
      - float
      - --
@@ -94,6 +102,7 @@ import numpy as np
 from mitpiv.errors import ConfigError, check_positive
 from mitpiv.physics.camera import CV_TO_MITSUBA as _CV_TO_MI
 from mitpiv.physics.camera import PinholeCamera
+from mitpiv.physics.distortion import Distortion, distort, undistort
 from mitpiv.physics.plenoptic import PRESETS, PlenopticCamera
 from mitpiv.render.plugins._props import PropertyReader, read_placement
 from mitpiv.render.plugins._sensor import MitpivSensor, film_resolution
@@ -158,6 +167,8 @@ class Plenoptic(MitpivSensor):
             missing.append("f_number (or aperture_diameter_mm)")
         if missing:
             raise ConfigError(f"plenoptic: missing parameter(s) {missing}; give them or a 'preset'.")
+        if any(rd.has(k) for k in ("k1", "k2", "k3")):
+            kw["distortion"] = Distortion(k1=rd.float("k1", 0.0), k2=rd.float("k2", 0.0), k3=rd.float("k3", 0.0))
         q_home = rd.float("crosstalk_sample_fraction", 0.8)
         if not 0.0 < q_home < 1.0:
             raise ConfigError(f"plenoptic: 'crosstalk_sample_fraction' must lie in (0, 1), got {q_home}.")
@@ -183,6 +194,7 @@ class Plenoptic(MitpivSensor):
         self._binv = [[float(v) for v in row] for row in binv]
         self._o = [float(v) for v in cam.origin_mm]
         self._hex = cam.mla_layout == "hex"
+        self._dist = cam.distortion
         self._nx, self._ny = cam.mla_count
         self._area = cam.cell_area_mm2
         offs = cam.crosstalk_offsets()
@@ -287,6 +299,8 @@ class Plenoptic(MitpivSensor):
         t3x, t3y = t2x - lx * (1.0 / self._f), t2y - ly * (1.0 / self._f)
         cos2 = dr.rcp(1.0 + t3x * t3x + t3y * t3y)
         weight = dr.select(valid & inside, (self._area / (self._g * self._g)) * cos2 * cos2 / q, 0.0)
+        if not self._dist.is_zero:  # the object-side tangent the distorting lens maps onto t3
+            t3x, t3y = undistort(t3x, t3y, self._dist, iterations=12)
         return dict(px=px, py=py, i=li, j=lj, valid=valid, inside=inside, mx=mx, my=my, lx=lx, ly=ly,
                     t3x=t3x, t3y=t3y, weight=weight)
 
@@ -332,6 +346,8 @@ class Plenoptic(MitpivSensor):
         a = mi.warp.square_to_uniform_disk_concentric(sample) * self._ra
         inv_z = dr.rcp(p.z)
         t3x, t3y = (p.x - a.x) * inv_z, (p.y - a.y) * inv_z
+        if not self._dist.is_zero:  # the lens refracts the distorted object-side tangent
+            t3x, t3y = distort(t3x, t3y, self._dist)
         t2x, t2y = t3x + a.x * (1.0 / self._f), t3y + a.y * (1.0 / self._f)
         mx, my = a.x - self._si * t2x, a.y - self._si * t2y
         li, lj = self._nearest(mx, my)

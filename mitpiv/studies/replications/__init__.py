@@ -7,5 +7,6 @@ MODULES: dict[str, str] = {
     "sapiv-distortion": "mitpiv.studies.replications.sapiv_distortion",
     "channel-tomo": "mitpiv.studies.replications.channel_tomo",
     "multi-plenoptic": "mitpiv.studies.replications.multi_plenoptic",
+    "drop-fragments": "mitpiv.studies.replications.drop_fragments",
     "lfpiv-vs-tomo": "mitpiv.studies.replications.lfpiv_vs_tomo",
 }

@@ -1,0 +1,62 @@
+"""The plenoptic vs DIH drop-fragment replication (skeleton): its quick run (schema,
+required ids, sane values against the simulated truth). The paper's equations are tested
+in tests/analysis/test_drop_fragments.py and tests/physics/test_drop_impact.py."""
+
+import math
+
+from mitpiv.studies.replication import RESULTS_KEYS, replicate
+from mitpiv.studies.replications.drop_fragments import STUDY
+
+# The pellets are 2.0 mm spheres; the plenoptic sizing of the paper's camera at |M| = 0.28
+# (one refocused pixel ~0.14 mm) should land within a pixel or so of it.
+PELLET_D_ATOL_MM = 0.3
+
+
+def test_quick_run_schema_and_ids(tmp_path):
+    res = replicate("drop-fragments", tmp_path, quick=True)
+    assert set(RESULTS_KEYS) <= set(res)
+    assert res["scale"] == "quick" and res["study"] == "drop-fragments"
+    ids = [r["id"] for r in res["rows"]]
+    assert len(ids) == len(set(ids))
+    assert set(STUDY.required_ids) <= set(ids)
+    rows = {r["id"]: r for r in res["rows"]}
+    for r in res["rows"]:
+        assert {"id", "quantity", "paper_source", "paper", "ours", "tolerance", "agrees", "note"} <= set(r)
+    assert rows["n_found_plenoptic_we784_tau5.1"]["ours"] >= 1
+    assert rows["n_found_dih_we784_tau5.1"]["ours"] >= 1
+    assert abs(rows["pellet_mean_d_mm"]["ours"] - 2.0) < PELLET_D_ATOL_MM
+    assert rows["shock_bands_dih_not_plenoptic"]["agrees"] is True  # the bands of Figs. 30-31
+    assert {f"model_err_z_mm_we{we}_tau{tau}" for we, tau in ((624, 2.3), (1051, 9.0))} <= set(rows)
+    for k in ("model_err_x_mm_we784_tau5.1", "model_err_z_mm_we784_tau5.1"):
+        assert rows[k]["ours"] is None or (math.isfinite(rows[k]["ours"]) and rows[k]["ours"] >= 0)
+    c = res["curves"]["mean_d_over_d0_we784"]
+    assert c["x"] == [2.6, 5.1, 7.7] and len(c["y"]["plenoptic"]) == 3
+    assert (tmp_path / "report.md").is_file()
+
+
+# Rendered dot cards through the ideal lens: the dots' stack locations in nominal
+# millimetres are the dots themselves up to the dot finder's error. Measured (2x supersampled
+# stacks of 0.1 mm planes): 0.8 um lateral RMS (the lenslet footprint is 93 um); in depth a
+# scatter of 0.01-0.015 mm per card and a bias towards the focal plane of ~0.1 mm at
+# +-2.5 mm (the sharpest refocused plane is pulled towards the lenslet plane; the
+# dot-card dewarp absorbs it).
+CARD_LATERAL_RMS_MM = 0.01
+CARD_DEPTH_SD_MM = 0.03
+CARD_DEPTH_BIAS_MM = 0.15
+
+
+def test_rendered_dot_cards_locate_the_dots():
+    import numpy as np
+
+    from mitpiv.studies.replications.drop_fragments import _camera_and_sensor, render_dot_card_observations
+
+    cam, sensor = _camera_and_sensor({"crop_px": (420, 308), "aim_mm": (0.0, 0.0), "k1": 0.0})
+    obs = render_dot_card_observations(sensor, cam, depths_mm=[-2.5, 2.5], pitch_mm=0.5, dot_mm=0.2,
+                                       half_range_mm=1.5, planes=31, spp=8)
+    assert len(obs["xyz"]) >= 20 and set(obs["depth_index"]) == {0, 1}
+    np.testing.assert_allclose(np.unique(np.round(obs["xyz"][:, 2], 6)), [-2.5, 2.5], atol=1e-6)
+    err = obs["uva"] - obs["xyz"]
+    assert np.sqrt(np.mean(err[:, :2] ** 2)) < CARD_LATERAL_RMS_MM
+    for k in (0, 1):
+        e = err[obs["depth_index"] == k, 2]
+        assert e.std() < CARD_DEPTH_SD_MM and abs(e.mean()) < CARD_DEPTH_BIAS_MM
