@@ -793,7 +793,7 @@ TOMO_METHODS = ("mlos", "mart", "smart", "sapiv")
 
 def reconstruct_volume(images, mappings, grid: VoxelGrid, method: str = "mart", *, iterations: int = 5, mu: float = 1.0,
                        weights: str = "circle", interpolation: str = "linear", preprocess: float | None = None,
-                       combine: str = "multiplicative", threshold_k: float | None = 3.0,
+                       smooth_px: float = 0.0, combine: str = "multiplicative", threshold_k: float | None = 3.0,
                        progress: Progress = None, cache: WeightCache | None = None) -> tuple[np.ndarray, dict]:
     """One entry point for the camera-image methods (``mlos``, ``mart``, ``smart``,
     ``sapiv``, the latter combining by ``combine`` with per-plane ``threshold_k``); returns
@@ -806,6 +806,6 @@ def reconstruct_volume(images, mappings, grid: VoxelGrid, method: str = "mart", 
                              threshold_k=threshold_k, progress=progress), {}
     if method in ("mart", "smart"):
         return mart(images, mappings, grid, iterations=iterations, mu=mu, smart=method == "smart", weights=weights,
-                    interpolation=interpolation, preprocess=preprocess, progress=progress, return_info=True,
-                    cache=cache, residuals="final")
+                    interpolation=interpolation, preprocess=preprocess, smooth_px=smooth_px, progress=progress,
+                    return_info=True, cache=cache, residuals="final")
     raise ConfigError(f"reconstruct: method={method!r} is not one of {TOMO_METHODS}.")

@@ -168,3 +168,13 @@ def test_old_kind_name_and_unknown_kind(tmp_path):
     assert load_experiment(p).kind == "tomo"
     with pytest.raises(ConfigError, match="not a known experiment kind.*tomo.*backlit"):
         load_experiment(p, {"kind": "holography"})
+
+
+def test_image_smoothing_is_a_checked_reconstruction_key():
+    """[reconstruction] smooth_px reaches MART (default 0: off) and a negative sigma is refused
+    by name before any stage runs."""
+    path = SCENES / "tomo4" / "experiment.toml"
+    assert load_experiment(path).reconstruction.smooth_px == 0.0
+    assert load_experiment(path, {"reconstruction.smooth_px": 0.7}).reconstruction.smooth_px == 0.7
+    with pytest.raises(ConfigError, match=r"\[reconstruction\] smooth_px"):
+        load_experiment(path, {"reconstruction.smooth_px": -1.0})
