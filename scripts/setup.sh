@@ -15,6 +15,11 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     echo "[setup] installing mitpiv and dependencies into .venv"
     .venv/bin/python -m pip install -q --upgrade pip
     .venv/bin/python -m pip install -q -e ".[test,docs]"
+    # the peer trackers the tracking study and its tests run (the `peers` extra): openlpt's
+    # declared GUI dependencies include opencv-python, which would shadow
+    # opencv-python-headless, so both are installed without their dependencies (their
+    # runtime needs, numpy and pyyaml, are already there)
+    .venv/bin/python -m pip install -q --no-deps "openlpt==2.2.*" "optv==0.3.*"
     touch "$stamp"
 fi
 llvm_ok() {

@@ -23,7 +23,7 @@ Model (hand-written: no maintained Python package generates it):
   0.15^2) / 3) U_j = 0.158 U_j``, times ``envelope``: the curl of ``q(eta) psi(x)`` with
   ``psi`` a random-Fourier-mode vector potential whose curl is unit-variance isotropic
   turbulence of a von Karman spectrum (integral scale ``L11 = 0.4 delta_w``, the mixing
-    layer's large eddies span about half the layer; a choice, stated), frozen at a reference
+  layer's large eddies span about half the layer; a choice, stated), frozen at a reference
   station ``reference_x_mm`` (default 1 D):
 
       u' = curl(q psi) = q curl(psi) + grad(q) x psi,
