@@ -206,7 +206,7 @@ class NearFieldJet(Flow):
 
     def box_average(self, p_mm, window_mm, nodes: int = 4) -> np.ndarray:
         """Velocity averaged over boxes ``window_mm`` (w_x, w_y, w_z) [mm] along the world axes
-        centred on ``p_mm`` (N, 3): ``nodes``^3 Gauss-Legendre points (the window-filtered truth)."""
+        centred on ``p_mm`` (N, 3): ``nodes ** 3`` Gauss-Legendre points (the window-filtered truth)."""
         p = np.asarray(p_mm, dtype=float).reshape(-1, 3)
         win = np.broadcast_to(np.asarray(window_mm, dtype=float), (3,))
         t, w = np.polynomial.legendre.leggauss(int(nodes))
