@@ -40,7 +40,7 @@ def _scale(quick: bool) -> dict:
     from mitpiv.studies.sapiv_sim import patch_centres
 
     if quick:
-        return {"patches": [(12.5, 12.5)], "patch_mm": 2.0, "densities": DENSITIES_QUICK,
+        return {"patches": [(12.5, 12.5)], "patch_mm": 1.5, "densities": DENSITIES_QUICK,
                 "brown_levels": (1.0,), "combined_levels": (1.0,)}
     return {"patches": patch_centres(3, 50.0 / 3), "patch_mm": 3.0, "densities": DENSITIES_FULL,
             "brown_levels": D_LEVELS, "combined_levels": D_LEVELS}
