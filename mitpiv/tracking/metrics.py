@@ -28,7 +28,7 @@ from mitpiv.analysis.particles import assign
 from mitpiv.errors import ConfigError, check_positive
 from mitpiv.grid import VoxelGrid
 
-__all__ = ["particle_metrics", "track_metrics", "bin_tracks", "track_length_histogram"]
+__all__ = ["particle_metrics", "track_metrics", "bin_tracks", "bin_velocities", "track_length_histogram"]
 
 
 def _points(a, name, what):
@@ -187,8 +187,17 @@ def bin_tracks(tracks, grid: VoxelGrid) -> dict:
     if tracks.velocities_mm_s is None:
         raise ConfigError("bin_tracks: the tracks carry no velocities; regularise them first "
                           "(mitpiv.tracking.stb.regularise).")
-    p = tracks.positions_mm.reshape(-1, 3)
-    v = tracks.velocities_mm_s.reshape(-1, 3)
+    return bin_velocities(tracks.positions_mm, tracks.velocities_mm_s, grid)
+
+
+def bin_velocities(points_mm, velocities_mm_s, grid: VoxelGrid) -> dict:
+    """Velocities at points binned onto the voxels of ``grid`` (the Eulerian statistics of
+    :func:`bin_tracks`, also used for PIV vectors): ``points_mm`` and ``velocities_mm_s``
+    (..., 3) [mm], [mm/s]; rows with a NaN and points outside the grid are left out.
+    Returns ``count`` (n_z, n_y, n_x), ``mean_mm_s`` and ``std_mm_s`` (n_z, n_y, n_x, 3), NaN
+    where a bin has no sample (std: fewer than 2; the population value)."""
+    p = np.asarray(points_mm, dtype=float).reshape(-1, 3)
+    v = np.asarray(velocities_mm_s, dtype=float).reshape(-1, 3)
     ok = np.all(np.isfinite(p), axis=1) & np.all(np.isfinite(v), axis=1)
     p, v = p[ok], v[ok]
     nz, ny, nx = grid.shape

@@ -207,21 +207,10 @@ def bin_vectors(points_mm, velocities_mm_s, grid) -> dict:
     """Mean velocity per voxel of ``grid`` of vectors at ``points_mm`` ((N, 3) [mm], (N, 3)
     [mm/s]; rows with a NaN left out): ``count`` (n_z, n_y, n_x) and ``mean_mm_s``
     (n_z, n_y, n_x, 3), NaN where empty (as :func:`mitpiv.tracking.metrics.bin_tracks`)."""
-    p = np.asarray(points_mm, float).reshape(-1, 3)
-    v = np.asarray(velocities_mm_s, float).reshape(-1, 3)
-    ok = np.all(np.isfinite(p), axis=1) & np.all(np.isfinite(v), axis=1)
-    p, v = p[ok], v[ok]
-    nz, ny, nx = grid.shape
-    ijk = np.floor((p - np.asarray(grid.origin_mm)) / np.asarray(grid.voxel_mm)).astype(np.int64)
-    inside = np.all((ijk >= 0) & (ijk < np.array([nx, ny, nz])), axis=1)
-    ijk, v = ijk[inside], v[inside]
-    flat = (ijk[:, 2] * ny + ijk[:, 1]) * nx + ijk[:, 0]
-    count = np.bincount(flat, minlength=grid.n_voxels).astype(np.float64)
-    s1 = np.stack([np.bincount(flat, weights=v[:, k], minlength=grid.n_voxels) for k in range(3)], axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = s1 / count[:, None]
-    mean[count == 0] = np.nan
-    return {"count": count.reshape(nz, ny, nx).astype(np.int64), "mean_mm_s": mean.reshape(nz, ny, nx, 3)}
+    from mitpiv.tracking.metrics import bin_velocities
+
+    b = bin_velocities(points_mm, velocities_mm_s, grid)
+    return {"count": b["count"], "mean_mm_s": b["mean_mm_s"]}
 
 
 def _warm_up(images, maps, grid, method) -> None:
