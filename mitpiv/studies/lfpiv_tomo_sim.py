@@ -376,21 +376,29 @@ def _dt(first_window_x_vox: int, voxel_x_mm: float) -> float:
 
 
 # ---------------------------------------------------------------------- points
+def _particle_pair(case, kind: str, density: float, grid: VoxelGrid, seed: int, flow_seed: int, window_scale: float):
+    """The two frames' particles of one case: the jet, the case's PIV passes (Table 2), the
+    frame separation from the first window, particles seeded in the grid and advected (RK4)."""
+    from mitpiv.physics.advection import advect
+
+    rng = np.random.default_rng(seed)
+    fl = jet(flow_seed)
+    passes = window_plan(kind, density, fit_shape_zyx=grid.shape, scale=window_scale)
+    dt = _dt(passes[0][0], grid.voxel_mm[0])
+    p0 = seed_particles(grid, case.n_particles(), rng)
+    p1 = advect(p0, fl.velocity, dt_s=dt, substeps=4)
+    return fl, passes, dt, p0, p1
+
+
 def lf_point(case: LFCase, *, iterations: int, rays_per_aperture_pixel: float, drt_rays_per_pixel: int,
              window_scale: float, seed: int, flow_seed: int = 0) -> dict:
     """Render, reconstruct (DRT-MART) and score one light-field case (two frames)."""
-    from mitpiv.physics.advection import advect
     from mitpiv.reconstruct.plenoptic import drt_mart, drt_weights
 
     t0 = time.perf_counter()
     cam = lf_camera(case)
     grid = case.grid()
-    rng = np.random.default_rng(seed)
-    fl = jet(flow_seed)
-    passes = window_plan("lf", case.pmr, fit_shape_zyx=grid.shape, scale=window_scale)
-    dt = _dt(passes[0][0], grid.voxel_mm[0])
-    p0 = seed_particles(grid, case.n_particles(), rng)
-    p1 = advect(p0, fl.velocity, dt_s=dt, substeps=4)
+    fl, passes, dt, p0, p1 = _particle_pair(case, "lf", case.pmr, grid, seed, flow_seed, window_scale)
     t_r = time.perf_counter()
     imgs = to_8bit([render_light_field(cam, p, rays_per_aperture_pixel=rays_per_aperture_pixel, seed=seed + k)
                     for k, p in enumerate((p0, p1))])
@@ -435,7 +443,6 @@ def ideal_piv_errors(p0, p1, grid: VoxelGrid, flow, dt_s: float, passes, *, sigm
 
 def tomo_point(case: TomoCase, *, iterations: int, window_scale: float, seed: int, flow_seed: int = 0) -> dict:
     """Render, reconstruct (MLOS-SMART) and score one tomographic case (two frames)."""
-    from mitpiv.physics.advection import advect
     from mitpiv.reconstruct import mart
     from mitpiv.reconstruct.mapping import PinholeMapping
 
@@ -443,12 +450,7 @@ def tomo_point(case: TomoCase, *, iterations: int, window_scale: float, seed: in
     cams = tomo_cameras(case)
     maps = [PinholeMapping(c) for c in cams]
     grid = case.grid()
-    rng = np.random.default_rng(seed)
-    fl = jet(flow_seed)
-    passes = window_plan("tomo", case.ppp, fit_shape_zyx=grid.shape, scale=window_scale)
-    dt = _dt(passes[0][0], grid.voxel_mm[0])
-    p0 = seed_particles(grid, case.n_particles(), rng)
-    p1 = advect(p0, fl.velocity, dt_s=dt, substeps=4)
+    fl, passes, dt, p0, p1 = _particle_pair(case, "tomo", case.ppp, grid, seed, flow_seed, window_scale)
     t_r = time.perf_counter()
     frames = [render_tomo(cams, p) for p in (p0, p1)]
     render_s = time.perf_counter() - t_r

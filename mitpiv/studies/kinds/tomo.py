@@ -289,15 +289,22 @@ def schema():
     return model
 
 
-def prepare(raw: dict, base_dir: Path) -> dict:
-    """Resolve the scene XML and a particle list against the experiment's folder (before
-    validation); the particle list's content hash joins the seeding table."""
+def resolve_scene_xml(raw: dict, base_dir: Path) -> dict:
+    """``[scene] xml`` resolved against the experiment's folder (before validation); a
+    missing file is a ConfigError naming the key and the resolved path."""
     scene = raw.get("scene")
     if isinstance(scene, dict) and isinstance(scene.get("xml"), str):
         xml = (base_dir / scene["xml"]).resolve()
         if not xml.is_file():
             raise ConfigError(f"experiment: [scene] xml = {scene['xml']!r} does not exist (resolved to {xml}).")
         raw = {**raw, "scene": {**scene, "xml": str(xml)}}
+    return raw
+
+
+def prepare(raw: dict, base_dir: Path) -> dict:
+    """Resolve the scene XML and a particle list against the experiment's folder (before
+    validation); the particle list's content hash joins the seeding table."""
+    raw = resolve_scene_xml(raw, base_dir)
     seeding = raw.get("seeding")
     if isinstance(seeding, dict) and isinstance(seeding.get("file"), str):
         import hashlib

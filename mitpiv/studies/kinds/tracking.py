@@ -55,7 +55,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from mitpiv.errors import CalibrationError, ConfigError
-from mitpiv.studies.kinds.tomo import SceneTable
+from mitpiv.studies.kinds.tomo import SceneTable, resolve_scene_xml
 from mitpiv.studies.kinds.tracking_compare import CompareTable
 from mitpiv.studies.runner import RENDER_PACKAGES, Kind, Stage, StageContext
 from mitpiv.studies.schema import Table, Vec3
@@ -242,13 +242,7 @@ def schema():
 
 def prepare(raw: dict, base_dir: Path) -> dict:
     """Resolve the scene XML against the experiment's folder (before validation)."""
-    scene = raw.get("scene")
-    if isinstance(scene, dict) and isinstance(scene.get("xml"), str):
-        xml = (base_dir / scene["xml"]).resolve()
-        if not xml.is_file():
-            raise ConfigError(f"experiment: [scene] xml = {scene['xml']!r} does not exist (resolved to {xml}).")
-        raw = {**raw, "scene": {**scene, "xml": str(xml)}}
-    return raw
+    return resolve_scene_xml(raw, base_dir)
 
 
 # ------------------------------------------------------------------------------- helpers
