@@ -21,9 +21,9 @@ Steps
    coordinate by ``-s, 0, +s`` and fits a parabola; here one damped Gauss-Newton step per
    iteration does the same job with the analytic derivatives of the OTF and of the
    camera (``jacobian``), each coordinate step limited to the shake amplitude ``s``
-   (ten times fewer image evaluations, the same minimum). Particles whose images do not overlap move
-   together (vectorised); overlapping ones are in different groups, shaken one group
-   after another with the residual updated in between (:func:`colour_groups`).
+   (ten times fewer image evaluations, the same minimum). The particles are shaken one
+   after another (a compiled Gauss-Seidel pass, :mod:`mitpiv.tracking._kernels`) with the
+   residual updated after each, so overlapping particles share their light.
 4. :func:`ipr`: outer loops of detection on the residual images, triangulation (all
    cameras first, then every set with one camera left out), shaking and removal of weak
    particles (intensity below ``min_intensity`` times the median) and duplicates. A
@@ -31,7 +31,8 @@ Steps
    above the threshold there) or fall off that camera's sensor; else it is a ghost.
 
 Memory and time are linear in the particle count: KD-trees and sparse neighbour lists
-(SciPy) do the searches, chunks of particles bound the stamp arrays. Hand-written because
+(SciPy) do the searches, chunks of particles bound the stamp arrays, and the shake costs
+one pass over each particle's windows per iteration. Hand-written because
 no kept Python library offers IPR; the projector is :mod:`mitpiv.tracking.otf`.
 """
 
@@ -46,9 +47,9 @@ import numpy as np
 from mitpiv.analysis.particles import gauss3_offset
 from mitpiv.errors import ConfigError, check_positive
 from mitpiv.progress import bar
-from mitpiv.tracking.otf import OTF, project_particles, stamps
+from mitpiv.tracking.otf import OTF, project_particles
 
-__all__ = ["IPRResult", "detect_peaks", "triangulate", "shake", "ipr", "auto_threshold", "mm_per_px", "colour_groups"]
+__all__ = ["IPRResult", "detect_peaks", "triangulate", "shake", "ipr", "auto_threshold", "mm_per_px"]
 
 log = logging.getLogger(__name__)
 
@@ -278,113 +279,36 @@ def triangulate(peaks, cameras, *, tolerance_px: float, lower_mm, upper_mm, use=
 
 
 # ---------------------------------------------------------------------- shaking
-def _windows(res, cam, otf, k, p, e, r):
-    """Per-particle window of camera k: cols, rows, in-image mask, augmented residual."""
-    w, h = cam.resolution
-    uv = cam.project(p)
-    vis = cam.in_front(p) & np.all(np.isfinite(uv), axis=1)
-    uv = np.where(vis[:, None], uv, -10.0 * r)
-    a, b, c, pk = otf.params(k, p)
-    cols, rows, own = stamps(uv, a, b, c, pk * e, r)
-    inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h) & vis[:, None, None]
-    aug = np.where(inside, res[np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)] + own, 0.0)
-    return cols, rows, inside, aug, (a, b, c, pk)
-
-
-def _stamp_on(cam, p, cols, rows, inside, params):
-    """Unit-intensity particle image at positions p sampled on given windows (the OTF
-    parameters of the window's particle, which vary slowly with position)."""
-    uv = cam.project(p)
-    a, b, c, pk = params
-    du = cols + 0.5 - uv[:, 0, None, None]
-    dv = rows + 0.5 - uv[:, 1, None, None]
-    q = a[:, None, None] * du * du + 2 * b[:, None, None] * du * dv + c[:, None, None] * dv * dv
-    return np.where(inside, pk[:, None, None] * np.exp(-0.5 * q), 0.0)
-
-
-def colour_groups(positions_mm, cameras, radius_px: float, *, seed: int = 0) -> list[np.ndarray]:
-    """Split particles into groups whose images do not overlap in any camera (projections
-    at least ``radius_px`` apart): a vectorised Jones-Plassmann colouring with random
-    priorities. Returns index arrays, one per group."""
-    from scipy.spatial import cKDTree
-
-    n = positions_mm.shape[0]
-    if n == 0:
-        return []
-    edges = [np.zeros((0, 2), np.int64)]
-    for cam in cameras:
-        uv = cam.project(positions_mm)
-        ok = np.flatnonzero(np.all(np.isfinite(uv), axis=1))
-        if ok.size > 1:
-            pr = cKDTree(uv[ok]).query_pairs(radius_px, output_type="ndarray")
-            edges.append(ok[pr])
-    e = np.concatenate(edges)
-    e = np.concatenate([e, e[:, ::-1]])
-    prio = np.random.default_rng(seed).permutation(n)
-    colour = np.full(n, -1)
-    c = 0
-    while np.any(colour < 0):
-        open_ = colour < 0
-        live = open_[e[:, 0]] & open_[e[:, 1]]
-        beaten = np.zeros(n, bool)
-        el = e[live]
-        beaten[el[prio[el[:, 1]] > prio[el[:, 0]], 0]] = True
-        colour[open_ & ~beaten] = c
-        c += 1
-    order = np.argsort(colour, kind="stable")
-    return np.split(order, np.flatnonzero(np.diff(colour[order])) + 1)
-
-
-def _shake_group(res, cameras, otf, pc, ec, s, r, fixed_intensity):
-    """One damped Gauss-Newton step of position (and intensity) per particle against its
-    augmented residual in every camera, each coordinate step limited to +-s [mm]; the
-    residual images ``res`` are updated in place on the particles' windows."""
-    wins = [_windows(res[k], cam, otf, k, pc, ec, r) for k, cam in enumerate(cameras)]
-    own_old = [w[3] - np.where(w[2], res[k][np.clip(w[1], 0, res[k].shape[0] - 1), np.clip(w[0], 0, res[k].shape[1] - 1)], 0.0)
-               for k, w in enumerate(wins)]
-    m = 3 if fixed_intensity else 4
-    jtj = np.zeros((pc.shape[0], m, m))
-    jtr = np.zeros((pc.shape[0], m))
-    for k, cam in enumerate(cameras):
-        cols, rows, inside, aug, (a, b, c, pk) = wins[k]
-        uv = cam.project(pc)
-        jac = cam.jacobian(pc)
-        du = cols + 0.5 - uv[:, 0, None, None]
-        dv = rows + 0.5 - uv[:, 1, None, None]
-        q = a[:, None, None] * du * du + 2 * b[:, None, None] * du * dv + c[:, None, None] * dv * dv
-        g = np.where(inside, pk[:, None, None] * np.exp(-0.5 * q), 0.0)
-        eg = ec[:, None, None] * g
-        gu = eg * (a[:, None, None] * du + b[:, None, None] * dv)
-        gv = eg * (b[:, None, None] * du + c[:, None, None] * dv)
-        cols_j = [gu * jac[:, 0, i, None, None] + gv * jac[:, 1, i, None, None] for i in range(3)]
-        if not fixed_intensity:
-            cols_j.append(g)
-        dm = np.stack([x.reshape(x.shape[0], -1) for x in cols_j], axis=2)  # (N, P, m)
-        rr = (aug - eg).reshape(pc.shape[0], -1)
-        jtj += np.einsum("npi,npj->nij", dm, dm)
-        jtr += np.einsum("npi,np->ni", dm, rr)
-    diag = np.einsum("nii->ni", jtj)
-    damp = jtj + (1e-3 * diag + 1e-12)[:, :, None] * np.eye(m)
-    step = np.linalg.solve(damp, jtr[..., None])[..., 0]
-    step = np.nan_to_num(step)
-    pn = pc + np.clip(step[:, :3], -s, s)
-    en = ec if fixed_intensity else np.maximum(ec + step[:, 3], 0.0)
-    # residual update on the same windows: old image back in, new image out
-    for k, cam in enumerate(cameras):
-        cols, rows, inside, aug, prm = wins[k]
-        new = en[:, None, None] * _stamp_on(cam, pn, cols, rows, inside, prm)
-        np.add.at(res[k], (rows[inside], cols[inside]), (own_old[k] - new)[inside])
-    return pn, en
+def _pass_inputs(cameras, otf, p):
+    """Per-camera projections, Jacobians, visibility and OTF parameters of particles p,
+    stacked (K, N, ...) for the compiled shake pass."""
+    n = p.shape[0]
+    k_n = len(cameras)
+    uv = np.zeros((k_n, n, 2))
+    jac = np.zeros((k_n, n, 2, 3))
+    vis = np.zeros((k_n, n), bool)
+    prm = np.zeros((4, k_n, n))
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for k, cam in enumerate(cameras):
+            u = cam.project(p)
+            j = cam.jacobian(p)
+            ok = cam.in_front(p) & np.all(np.isfinite(u), axis=1) & np.all(np.isfinite(j), axis=(1, 2))
+            uv[k] = np.where(ok[:, None], u, 0.0)
+            jac[k] = np.where(ok[:, None, None], j, 0.0)
+            vis[k] = ok
+            prm[:, k] = otf.params(k, p)
+    return uv, jac, vis, prm
 
 
 def shake(images, cameras, otf: OTF, positions_mm, intensities, *, step_mm: float, iterations: int = 6,
-          chunk: int = 20_000, fixed_intensity: bool = False) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+          fixed_intensity: bool = False) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Shake particles against the residual images (see the module notes).
 
-    Particles whose images overlap are never moved together: they are split into groups
-    of non-overlapping particles (:func:`colour_groups`), each group is shaken at once
-    (vectorised) and the residual images are updated before the next group, so two
-    overlapping particles share their light as in a sequential (Gauss-Seidel) shake.
+    Each iteration visits the particles one after another in a random order (Wieneke's
+    sequential shake, compiled: :mod:`mitpiv.tracking._kernels`): a particle takes one
+    damped Gauss-Newton step of its position (and intensity) against its augmented
+    residual, and the residual images are updated before the next particle, so two
+    overlapping particles share their light.
 
     Parameters
     ----------
@@ -393,26 +317,30 @@ def shake(images, cameras, otf: OTF, positions_mm, intensities, *, step_mm: floa
     step_mm : first shake amplitude (largest step per coordinate) [mm]; it shrinks by 0.6
         per iteration (floor 5 %).
     iterations : shake iterations.
-    chunk : particles per vectorised batch (bounds memory).
     fixed_intensity : keep the intensities (only move).
 
     Returns
     -------
     positions_mm (N, 3), intensities (N,) (>= 0), residual images (list of (H, W)).
     """
+    from mitpiv.tracking._kernels import kernels
+
     imgs = [np.asarray(i, dtype=np.float64) for i in images]
     p = np.array(positions_mm, dtype=np.float64).reshape(-1, 3)
     e = np.array(np.broadcast_to(np.asarray(intensities, dtype=np.float64), (p.shape[0],)))
     s0 = check_positive("step_mm", step_mm, owner="shake", unit="mm")
     r = otf.radius_px()
-    res = [img - pr for img, pr in zip(imgs, project_particles(p, e, cameras, otf), strict=True)]
-    for it in range(int(iterations)):
-        s = s0 * max(0.6**it, 0.05)
-        for group in colour_groups(p, cameras, r + 1, seed=it):
-            for lo_i in range(0, group.size, chunk):
-                g = group[lo_i:lo_i + chunk]
-                pn, en = _shake_group(res, cameras, otf, p[g], e[g], s, r, fixed_intensity)
-                p[g], e[g] = pn, en
+    if p.shape[0] and int(iterations) > 0:
+        wh = np.array([[i.shape[1], i.shape[0]] for i in imgs], dtype=np.int64)
+        res = np.zeros((len(imgs), int(wh[:, 1].max()), int(wh[:, 0].max())))
+        for k, (img, pr) in enumerate(zip(imgs, project_particles(p, e, cameras, otf), strict=True)):
+            res[k, :img.shape[0], :img.shape[1]] = img - pr
+        shake_pass = kernels()["shake_pass"]
+        for it in range(int(iterations)):
+            s = s0 * max(0.6**it, 0.05)
+            uv, jac, vis, (a, b, c, pk) = _pass_inputs(cameras, otf, p)
+            order = np.random.default_rng(it).permutation(p.shape[0])
+            shake_pass(res, wh, uv, jac, vis, a, b, c, pk, p, e, order, float(s), int(r), bool(fixed_intensity))
     res = [img - pr for img, pr in zip(imgs, project_particles(p, e, cameras, otf), strict=True)]
     return p, e, res
 

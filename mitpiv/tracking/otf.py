@@ -22,8 +22,9 @@ weighted linear least-squares fit of ``log I`` to a quadratic in ``(u, v)`` (exa
 Gaussian, batched over particles), and each sub-volume takes the median of the particles
 inside it.
 
-Hand-written (NumPy): the projector is a scatter of small Gaussian stamps with
-``np.bincount`` (no kept library renders elliptical Gaussians at arbitrary sub-pixel
+Hand-written: the projector is a compiled scatter of small Gaussian stamps
+(``splat`` in :mod:`mitpiv.tracking._kernels`; :func:`stamps` gives the same stamps as
+NumPy arrays) (no kept library renders elliptical Gaussians at arbitrary sub-pixel
 positions with per-particle shapes); the calibration fit is a batched 6x6 solve.
 """
 
@@ -185,16 +186,6 @@ def stamps(uv_px, a, b, c, amplitude, radius: int):
     return np.broadcast_to(cols, q.shape), np.broadcast_to(rows, q.shape), amplitude[:, None, None] * np.exp(-0.5 * q)
 
 
-def _accumulate(cols, rows, values, resolution, out=None):
-    w, h = resolution
-    ok = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
-    img = np.bincount((rows[ok] * w + cols[ok]), weights=values[ok], minlength=w * h).reshape(h, w)
-    if out is not None:
-        out += img
-        return out
-    return img
-
-
 def project_particles(positions_mm, intensities, cameras, otf: OTF, *, chunk: int = 50_000) -> list[np.ndarray]:
     """Render particles into one image per camera with the OTF.
 
@@ -214,7 +205,10 @@ def project_particles(positions_mm, intensities, cameras, otf: OTF, *, chunk: in
     e = np.broadcast_to(np.asarray(intensities, dtype=np.float64), (p.shape[0],))
     if len(cameras) != otf.n_cameras:
         raise ConfigError(f"project_particles: {len(cameras)} cameras but the OTF has {otf.n_cameras}; calibrate one per camera.")
+    from mitpiv.tracking._kernels import kernels
+
     r = otf.radius_px()
+    splat = kernels()["splat"]
     images = []
     for k, cam in enumerate(cameras):
         w, h = cam.resolution
@@ -226,8 +220,7 @@ def project_particles(positions_mm, intensities, cameras, otf: OTF, *, chunk: in
             uv = cam.project(ps)
             near = np.all(np.isfinite(uv), axis=1) & (uv[:, 0] > -r) & (uv[:, 0] < w + r) & (uv[:, 1] > -r) & (uv[:, 1] < h + r)
             a, b, c, pk = otf.params(k, ps[near])
-            cols, rows, vals = stamps(uv[near], a, b, c, pk * es[near], r)
-            _accumulate(cols, rows, vals, (w, h), img)
+            splat(img, np.ascontiguousarray(uv[near]), a, b, c, np.ascontiguousarray(pk * es[near]), int(r))
         images.append(img)
     return images
 
@@ -235,6 +228,8 @@ def project_particles(positions_mm, intensities, cameras, otf: OTF, *, chunk: in
 def add_particles(images, positions_mm, intensities, cameras, otf: OTF) -> None:
     """Add the images of particles to ``images`` in place (negative intensities subtract):
     the sparse counterpart of :func:`project_particles` for a few particles."""
+    from mitpiv.tracking._kernels import kernels
+
     p = np.asarray(positions_mm, dtype=np.float64).reshape(-1, 3)
     e = np.broadcast_to(np.asarray(intensities, dtype=np.float64), (p.shape[0],))
     r = otf.radius_px()
@@ -244,9 +239,8 @@ def add_particles(images, positions_mm, intensities, cameras, otf: OTF) -> None:
         front = cam.in_front(p)
         uv = cam.project(p[front])
         a, b, c, pk = otf.params(k, p[front])
-        cols, rows, vals = stamps(np.nan_to_num(uv, nan=-1e9), a, b, c, pk * e[front], r)
-        ok = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
-        np.add.at(img, (rows[ok], cols[ok]), vals[ok])
+        kernels()["splat"](img, np.ascontiguousarray(uv, dtype=np.float64), a, b, c,
+                           np.ascontiguousarray(pk * e[front]), int(r))
 
 
 def _fit_blobs(image, uv, h):
