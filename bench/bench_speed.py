@@ -14,6 +14,9 @@ Rows (each: our time, the baseline's, the ratio, the accuracy difference):
   regions, the first pass (36^3 windows, 18-voxel margin) and a later one (24^3, 6): ours
   (float32 FFTs of the fluctuations, compiled running box sums) vs the frozen float64 /
   summed-volume-table code (bench/reference_ncc.py); largest coefficient difference.
+* The tracker's shake (IPR and STB) at 0.05 ppp, 4 cameras: ours (compiled sequential
+  Gauss-Seidel pass) vs the frozen coloured-group NumPy shake (bench/reference_shake.py);
+  RMS projected error against the truth of both.
 * Focal stack of a plenoptic raw image (additive): ours vs shift-and-add over the
   sub-aperture views with scipy.ndimage.shift (bilinear).
 * 1000-plane focal stack of a 6600x4400 raw image: ours and the pre-issue plane kernel on
@@ -182,6 +185,50 @@ def ncc_rows(quick):
              f"per vector {1e3 * t1 / n:.1f} ms vs {1e3 * t0 / n:.1f} ms")
 
 
+# ------------------------------------------------------------------------------ tracking
+def _tracking_rig(res):
+    from mitpiv.physics.camera import PinholeCamera, place_camera
+
+    cams = []
+    for az, el in [(20, 25), (-20, 25), (20, -25), (-20, -25)]:
+        rot, pos = place_camera(azimuth_deg=az + 90, elevation_deg=el, distance_mm=400.0)
+        cams.append(PinholeCamera(resolution=res, focal_length_mm=50.0, pixel_pitch_um=10.0, rotation=rot,
+                                  position_mm=pos))
+    return cams
+
+
+def shake_rows(quick):
+    """The shake of IPR / STB (issue 27's tracker) at 0.05 ppp: ours (compiled sequential
+    pass) vs the frozen coloured-group shake (bench/reference_shake.py), both from the same
+    start about 0.2 px (RMS, projected) off the truth; accuracy: RMS projected distance to the truth after."""
+    from reference_shake import shake as shake_reference
+
+    from mitpiv.tracking import OTF, project_particles, shake
+
+    res = (256, 256) if quick else (512, 512)
+    lo, hi = np.array([-7.0, -7.0, -3.5]), np.array([7.0, 7.0, 3.5])
+    if not quick:
+        lo, hi = 2 * lo, 2 * hi
+    cams = _tracking_rig(res)
+    otf = OTF.uniform(4, sigma_px=1.0, lower_mm=lo, upper_mm=hi)
+    rng = np.random.default_rng(0)
+    n = int(0.05 * res[0] * res[1])
+    true = rng.uniform(lo, hi, (n, 3))
+    imgs = project_particles(true, 1.0, cams, otf)
+    scale = 0.07  # mm per px at the box centre of this rig
+    start = true + rng.normal(0.0, 0.3 * scale / math.sqrt(3), (n, 3))
+    shake(imgs, cams, otf, start[:10], 1.0, step_mm=0.2 * scale, iterations=1)  # compile
+
+    def err(p):
+        return float(np.sqrt(np.mean([np.sum((c.project(p) - c.project(true)) ** 2, axis=1) for c in cams])))
+
+    (p1, _, _), t1, _ = timed(shake, imgs, cams, otf, start, 1.0, step_mm=0.5 * scale, iterations=6)
+    (p0, _, _), t0, _ = timed(shake_reference, imgs, cams, otf, start, 1.0, step_mm=0.5 * scale, iterations=6)
+    emit(f"shake {n} particles (0.05 ppp), 4 cameras {res[0]}x{res[1]}, 6 iterations", t1,
+         "coloured groups, vectorised NumPy (pre-issue)", t0,
+         f"RMS error {err(p1):.4f} px vs {err(p0):.4f} px (start {err(start):.3f} px)")
+
+
 # ------------------------------------------------------------------------------ focal stacks
 def focal_rows(n_px, planes):
     from bench_lightfield import baseline_plane, synthetic_lf
@@ -295,7 +342,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="smaller cases (a few minutes)")
     ap.add_argument("--scale", type=float, default=None, help="MART lateral scale (1 = 480x320x130)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks.md"))
-    ap.add_argument("--sections", default="mart,piv,ncc,focal,big,scaling", help="comma-separated subset to run")
+    ap.add_argument("--sections", default="mart,piv,ncc,shake,focal,big,scaling", help="comma-separated subset to run")
     a = ap.parse_args(argv)
     scale = a.scale or (0.3 if a.quick else 0.5)
     print("| stage | ours | baseline | baseline time | ratio | accuracy | notes |")
@@ -307,6 +354,8 @@ def main(argv=None):
         piv_rows((64, 160, 160) if a.quick else (80, 256, 256))
     if "ncc" in sections:
         ncc_rows(a.quick)
+    if "shake" in sections:
+        shake_rows(a.quick)
     if "focal" in sections:
         focal_rows(800 if a.quick else 1600, 11 if a.quick else 21)
     if "big" in sections:
@@ -317,7 +366,7 @@ def main(argv=None):
             + (" --quick" if a.quick else "") + f"` (`make bench`). Machine: {machine()}.\n\n"
             "The machine is shared with other jobs: absolute times are noisy; each ratio compares two "
             "codes timed one after the other in the same run. Baselines: the pre-issue code paths are frozen "
-            "copies (bench/reference_mart.py, bench/reference_piv3d.py, bench/reference_ncc.py, bench/reference_refocus.py).\n\n"
+            "copies (bench/reference_mart.py, bench/reference_piv3d.py, bench/reference_ncc.py, bench/reference_shake.py, bench/reference_refocus.py).\n\n"
             "| stage | ours | baseline | baseline time | ratio | accuracy | notes |\n|---|---|---|---|---|---|---|\n"
             + "\n".join(ROWS) + "\n")
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
