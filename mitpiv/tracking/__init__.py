@@ -8,12 +8,22 @@ LPT Challenge's metrics (:mod:`~mitpiv.tracking.metrics`).
 
 from mitpiv.tracking.ipr import IPRResult, auto_threshold, detect_peaks, ipr, mm_per_px, shake, triangulate
 from mitpiv.tracking.metrics import bin_tracks, particle_metrics, track_length_histogram, track_metrics
-from mitpiv.tracking.otf import OTF, add_particles, calibrate_otf, project_particles, stamps
+from mitpiv.tracking.otf import (
+    OTF,
+    add_particles,
+    calibrate_otf,
+    calibrate_otf_frames,
+    project_particles,
+    refine_otf,
+    stamps,
+)
 from mitpiv.tracking.stb import Tracks, link_four, predict, regularise, stb
 
 __all__ = [
     "OTF",
     "calibrate_otf",
+    "calibrate_otf_frames",
+    "refine_otf",
     "project_particles",
     "stamps",
     "IPRResult",

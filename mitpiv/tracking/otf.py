@@ -36,7 +36,7 @@ import numpy as np
 
 from mitpiv.errors import CalibrationError, ConfigError, check_positive
 
-__all__ = ["OTF", "calibrate_otf", "project_particles", "add_particles", "stamps"]
+__all__ = ["OTF", "calibrate_otf", "calibrate_otf_frames", "refine_otf", "project_particles", "add_particles", "stamps"]
 
 
 def _box(lower_mm, upper_mm, what):
@@ -243,16 +243,24 @@ def add_particles(images, positions_mm, intensities, cameras, otf: OTF) -> None:
                            np.ascontiguousarray(pk * e[front]), int(r))
 
 
-def _fit_blobs(image, uv, h):
+def _fit_blobs(image, uv, h, own=None):
     """Weighted log-quadratic fit of (2h+1)^2 windows around ``uv`` (N, 2): returns
-    a, b, c [1/px^2], centre (N, 2) [px], peak (N,) and a validity mask."""
+    a, b, c [1/px^2], centre (N, 2) [px], peak (N,) and a validity mask. ``own``: optional
+    ``(a, b, c, amplitude)`` (N,) of a model image centred on ``uv`` added to each window
+    (a particle's own image put back into a residual image)."""
     hgt, wid = image.shape
     o = np.arange(-h, h + 1)
     i0 = np.round(uv[:, 0] - 0.5).astype(np.int64)
     j0 = np.round(uv[:, 1] - 0.5).astype(np.int64)
     cols = np.clip(i0[:, None, None] + o[None, None, :], 0, wid - 1)
     rows = np.clip(j0[:, None, None] + o[None, :, None], 0, hgt - 1)
-    win = image[rows, cols].reshape(uv.shape[0], o.size * o.size)
+    win = image[rows, cols]
+    if own is not None:
+        oa, ob, oc, amp = (np.asarray(x, dtype=np.float64)[:, None, None] for x in own)
+        du = i0[:, None, None] + o[None, None, :] + 0.5 - uv[:, 0, None, None]
+        dv = j0[:, None, None] + o[None, :, None] + 0.5 - uv[:, 1, None, None]
+        win = win + amp * np.exp(-0.5 * (oa * du * du + 2 * ob * du * dv + oc * dv * dv))
+    win = win.reshape(uv.shape[0], o.size * o.size)
     x = np.broadcast_to(o[None, None, :], (1, o.size, o.size)).reshape(-1).astype(np.float64)
     y = np.broadcast_to(o[None, :, None], (1, o.size, o.size)).reshape(-1).astype(np.float64)
     mx = win.max(axis=1, keepdims=True)
@@ -291,58 +299,162 @@ def calibrate_otf(images, cameras, positions_mm, *, lower_mm, upper_mm, subvolum
     intensities : (N,) particle intensities, or None for 1 (then ``peak`` is the particles'
         median peak image value).
     window_px : half width of the fitted window [px]; 2 (5 x 5) suits sigma ~ 0.6 - 1.5 px.
-    isolation_px : only particles with no other projection closer than this [px] are
-        fitted; default ``2 window_px + 2``.
+    isolation_px : only particles with no other projection and no other image peak
+        (:func:`~mitpiv.tracking.ipr.detect_peaks`) closer than this [px] are fitted (the
+        peaks stand for the particles the positions miss, e.g. those a dense image did not
+        triangulate); default ``2 window_px + 2``.
     min_particles : fewest fitted particles a camera needs (else :class:`CalibrationError`).
 
     Returns
     -------
     OTF; a sub-volume with no fitted particle takes the camera's median over all particles.
+    See :func:`calibrate_otf_frames` to pool the particles of several frames (dense images,
+    where few particle images stand alone in one frame).
     """
+    return calibrate_otf_frames([images], cameras, [positions_mm], lower_mm=lower_mm, upper_mm=upper_mm,
+                                subvolumes=subvolumes, intensities=None if intensities is None else [intensities],
+                                window_px=window_px, isolation_px=isolation_px, min_particles=min_particles)
+
+
+def calibrate_otf_frames(frames, cameras, positions_mm, *, lower_mm, upper_mm, subvolumes=(1, 1, 1),
+                         intensities=None, window_px: int = 2, isolation_px: float | None = None,
+                         min_particles: int = 5) -> OTF:
+    """:func:`calibrate_otf` over several frames: the isolated particles of every frame are
+    fitted and pooled before the per-sub-volume medians (the particle image model does not
+    change between frames). ``frames``: a sequence of frames, each a sequence of per-camera
+    images; ``positions_mm``: one (N_f, 3) array per frame; ``intensities``: None or one
+    (N_f,) array per frame. Other parameters as :func:`calibrate_otf`."""
     from scipy.spatial import cKDTree
+
+    from mitpiv.tracking.ipr import detect_peaks  # ipr imports this module
 
     lo, hi = _box(lower_mm, upper_mm, "calibrate_otf")
     n = _subvolumes(subvolumes, "calibrate_otf")
-    if len(images) != len(cameras):
-        raise ConfigError(f"calibrate_otf: {len(images)} images for {len(cameras)} cameras; give one image per camera.")
-    p = np.asarray(positions_mm, dtype=np.float64).reshape(-1, 3)
-    e = np.ones(p.shape[0]) if intensities is None else np.broadcast_to(np.asarray(intensities, float), (p.shape[0],))
+    if len(frames) == 0 or len(positions_mm) != len(frames):
+        raise ConfigError(f"calibrate_otf: {len(frames)} frame(s) and {len(positions_mm)} position array(s); give one "
+                          f"position array per frame (at least one frame).")
+    if intensities is not None and len(intensities) != len(frames):
+        raise ConfigError(f"calibrate_otf: {len(intensities)} intensity array(s) for {len(frames)} frame(s).")
+    for images in frames:
+        if len(images) != len(cameras):
+            raise ConfigError(f"calibrate_otf: {len(images)} images for {len(cameras)} cameras; give one image per camera.")
     h = int(window_px)
     if h < 1:
         raise ConfigError(f"calibrate_otf: 'window_px' must be an integer >= 1, got {window_px!r}.")
     iso = 2 * h + 2 if isolation_px is None else check_positive("isolation_px", isolation_px, owner="calibrate_otf", unit="px")
     shape = (len(cameras),) + n
     out = {k: np.zeros(shape) for k in ("a", "b", "c", "peak")}
+    for k, cam in enumerate(cameras):
+        fits = []
+        for f, images in enumerate(frames):
+            img = np.asarray(images[k], dtype=np.float64)
+            p = np.asarray(positions_mm[f], dtype=np.float64).reshape(-1, 3)
+            e = np.ones(p.shape[0]) if intensities is None else np.broadcast_to(
+                np.asarray(intensities[f], float), (p.shape[0],))
+            vis = cam.visible(p)
+            uv = cam.project(p[vis])
+            pv, ev = p[vis], e[vis]
+            if uv.shape[0] > 1:
+                d, _ = cKDTree(uv).query(uv, k=2)
+                keep = d[:, 1] > iso
+            else:
+                keep = np.ones(uv.shape[0], bool)
+            # particles the positions do not hold (not triangulated) are peaks in the image:
+            # a fitted particle has no peak but its own within the isolation distance
+            peaks, _ = detect_peaks(img)
+            if peaks.shape[0] and uv.shape[0]:
+                keep &= np.asarray(cKDTree(peaks).query_ball_point(uv, iso, return_length=True)) <= 1
+            w, hh = cam.resolution
+            keep &= (uv[:, 0] > h + 1) & (uv[:, 0] < w - h - 1) & (uv[:, 1] > h + 1) & (uv[:, 1] < hh - h - 1)
+            a, b, c, _, pk, ok = _fit_blobs(img, uv[keep], h)
+            pk = pk / ev[keep]
+            ok &= np.isfinite(pk) & (pk > 0)
+            fits.append((pv[keep][ok], a[ok], b[ok], c[ok], pk[ok]))
+        pp, a, b, c, pk = (np.concatenate(x) for x in zip(*fits, strict=True))
+        if pp.shape[0] < min_particles:
+            raise CalibrationError(
+                f"calibrate_otf: camera {k} has {pp.shape[0]} isolated, fittable particle images in {len(frames)} "
+                f"frame(s), fewer than min_particles={min_particles}. Give more frames (or sparser particles), or "
+                f"lower 'isolation_px'.")
+        _cell_medians(out, k, pp, (a, b, c, pk), n, lo, hi)
+    return OTF(lo, hi, out["a"], out["b"], out["c"], out["peak"])
+
+
+def _cell_medians(out, k, pp, fits, n, lo, hi):
+    """Per sub-volume medians of the fitted (a, b, c, peak) of camera k into ``out``; a cell
+    with no particle takes the camera's median over all."""
+    cell = np.clip(((pp - lo) / (hi - lo) * np.asarray(n)).astype(np.int64), 0, np.asarray(n) - 1)
+    flat = np.ravel_multi_index(cell.T, n)
+    for key, vals in zip(("a", "b", "c", "peak"), fits, strict=True):
+        med = np.full(int(np.prod(n)), np.median(vals))
+        # per-cell median: sort by (cell, value) and take the middle element of each run
+        order = np.lexsort((vals, flat))
+        fs, vs = flat[order], vals[order]
+        starts = np.flatnonzero(np.r_[True, fs[1:] != fs[:-1]])
+        counts = np.diff(np.r_[starts, fs.size])
+        lo_i, hi_i = starts + (counts - 1) // 2, starts + counts // 2
+        med[fs[starts]] = 0.5 * (vs[lo_i] + vs[hi_i])
+        out[key][k] = med.reshape(n)
+
+
+def refine_otf(images, cameras, otf: OTF, positions_mm, intensities, *, subvolumes=None, window_px: int = 2,
+               isolation_px: float = 2.0, min_particles: int = 5) -> OTF:
+    """Re-fit the OTF on augmented residual images (Schanz et al. 2013): each particle's
+    window is the image minus the model images of all particles plus its own, so its
+    neighbours' light no longer widens the fit, as it does in a dense image where few
+    particle images stand alone.
+
+    Parameters
+    ----------
+    images : per-camera (H, W) images; cameras : the cameras.
+    otf : the current OTF (its model images are subtracted; its box and, by default, its
+        sub-volumes are kept).
+    positions_mm : (N, 3) reconstructed particles (e.g. :func:`~mitpiv.tracking.ipr.ipr`'s).
+    intensities : (N,) their intensities.
+    subvolumes : (n_x, n_y, n_z) of the new OTF (default: the current one's).
+    window_px : half width of the fitted window [px].
+    isolation_px : particles with another particle's projection closer than this [px] are
+        not fitted (their images merge).
+    min_particles : fewest fitted particles a camera needs (else :class:`CalibrationError`).
+
+    Returns
+    -------
+    OTF.
+    """
+    from scipy.spatial import cKDTree
+
+    p = np.asarray(positions_mm, dtype=np.float64).reshape(-1, 3)
+    e = np.broadcast_to(np.asarray(intensities, dtype=np.float64), (p.shape[0],))
+    if len(images) != len(cameras) or len(cameras) != otf.n_cameras:
+        raise ConfigError(f"refine_otf: {len(images)} images, {len(cameras)} cameras and an OTF of {otf.n_cameras}; "
+                          f"give one image per camera.")
+    h = int(window_px)
+    if h < 1:
+        raise ConfigError(f"refine_otf: 'window_px' must be an integer >= 1, got {window_px!r}.")
+    iso = check_positive("isolation_px", isolation_px, owner="refine_otf", unit="px")
+    n = otf.a.shape[1:] if subvolumes is None else _subvolumes(subvolumes, "refine_otf")
+    lo, hi = otf.lower_mm, otf.upper_mm
+    shape = (len(cameras),) + tuple(n)
+    out = {k: np.zeros(shape) for k in ("a", "b", "c", "peak")}
+    residuals = project_particles(p, e, cameras, otf)
     for k, (img, cam) in enumerate(zip(images, cameras, strict=True)):
-        img = np.asarray(img, dtype=np.float64)
-        vis = cam.visible(p)
+        res = np.asarray(img, dtype=np.float64) - residuals[k]
+        vis = cam.visible(p) & (e > 0)
         uv = cam.project(p[vis])
         pv, ev = p[vis], e[vis]
+        keep = np.ones(uv.shape[0], bool)
         if uv.shape[0] > 1:
             d, _ = cKDTree(uv).query(uv, k=2)
             keep = d[:, 1] > iso
-        else:
-            keep = np.ones(uv.shape[0], bool)
         w, hh = cam.resolution
         keep &= (uv[:, 0] > h + 1) & (uv[:, 0] < w - h - 1) & (uv[:, 1] > h + 1) & (uv[:, 1] < hh - h - 1)
-        a, b, c, _, pk, ok = _fit_blobs(img, uv[keep], h)
+        oa, ob, oc, opk = otf.params(k, pv[keep])
+        a, b, c, _, pk, ok = _fit_blobs(res, uv[keep], h, own=(oa, ob, oc, opk * ev[keep]))
         pk = pk / ev[keep]
         ok &= np.isfinite(pk) & (pk > 0)
         if ok.sum() < min_particles:
             raise CalibrationError(
-                f"calibrate_otf: camera {k} has {int(ok.sum())} isolated, fittable particle images, fewer than "
-                f"min_particles={min_particles}. Give more (or sparser) particles, or lower 'isolation_px'.")
-        pp = pv[keep][ok]
-        cell = np.clip(((pp - lo) / (hi - lo) * np.asarray(n)).astype(np.int64), 0, np.asarray(n) - 1)
-        flat = np.ravel_multi_index(cell.T, n)
-        for key, vals in (("a", a[ok]), ("b", b[ok]), ("c", c[ok]), ("peak", pk[ok])):
-            med = np.full(int(np.prod(n)), np.median(vals))
-            # per-cell median: sort by (cell, value) and take the middle element of each run
-            order = np.lexsort((vals, flat))
-            fs, vs = flat[order], vals[order]
-            starts = np.flatnonzero(np.r_[True, fs[1:] != fs[:-1]])
-            counts = np.diff(np.r_[starts, fs.size])
-            lo_i, hi_i = starts + (counts - 1) // 2, starts + counts // 2
-            med[fs[starts]] = 0.5 * (vs[lo_i] + vs[hi_i])
-            out[key][k] = med.reshape(n)
+                f"refine_otf: camera {k} has {int(ok.sum())} fittable particle images, fewer than "
+                f"min_particles={min_particles}. Give more particles, or lower 'isolation_px'.")
+        _cell_medians(out, k, pv[keep][ok], (a[ok], b[ok], c[ok], pk[ok]), n, lo, hi)
     return OTF(lo, hi, out["a"], out["b"], out["c"], out["peak"])

@@ -56,7 +56,10 @@ class Tracks:
     velocities_mm_s, accelerations_mm_s2 : (n_tracks, n_frames, 3) from
         :func:`regularise` (None before); positions are then the regularised ones and
         ``raw_positions_mm`` keeps the shaken ones.
-    history : per frame, a dict of counts (active, new, ended tracks).
+    history : per frame, a dict of counts: active, new and ended tracks, the ended ones by
+        reason (``ended_left_box``, ``ended_deviation`` from the prediction by more than
+        ``max_shake_px``, ``ended_intensity``, ``ended_merged`` into another track) and
+        untracked particles.
     """
 
     positions_mm: np.ndarray
@@ -292,15 +295,20 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
         for f in range(n_frames):
             imgs = frames[f]
             n_end = 0
+            reasons = {"ended_left_box": 0, "ended_deviation": 0, "ended_intensity": 0, "ended_merged": 0}
             tracked = np.flatnonzero(active)
             if f >= 4 and tracked.size:
                 pred = predict(pos[tracked, f - 4:f])
                 e0 = inten[tracked, f - 1]
                 ps, es, _ = shake(imgs, cameras, otf, pred, e0, step_mm=0.5 * max_shake_mm, iterations=shake_iterations)
-                ok = np.all(np.isfinite(ps), axis=1) & (np.linalg.norm(ps - pred, axis=1) <= max_shake_mm)
-                ok &= np.all((ps >= lo) & (ps <= hi), axis=1) & np.all((pred >= lo) & (pred <= hi), axis=1)
+                inside = np.all((ps >= lo) & (ps <= hi), axis=1) & np.all((pred >= lo) & (pred <= hi), axis=1)
+                near = np.all(np.isfinite(ps), axis=1) & (np.linalg.norm(ps - pred, axis=1) <= max_shake_mm)
+                ok = near & inside
                 ref = np.median(es[ok]) if ok.any() else 0.0
-                ok &= es > min_intensity * ref
+                bright = es > min_intensity * ref
+                reasons = {"ended_left_box": int((~inside).sum()), "ended_deviation": int((inside & ~near).sum()),
+                           "ended_intensity": int((ok & ~bright).sum()), "ended_merged": 0}
+                ok &= bright
                 active[tracked[~ok]] = False
                 n_end = int((~ok).sum())
                 tracked = tracked[ok]
@@ -328,6 +336,7 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
                     pos[tracked[gone], f] = np.nan
                     inten[tracked[gone], f] = np.nan
                     n_end += int(gone.sum())
+                    reasons["ended_merged"] = int(gone.sum())
                     keepm = np.concatenate([~gone, np.ones(allp.shape[0] - nt, bool)])
                     allp, alle, tracked = allp[keepm], alle[keepm], tracked[~gone]
                     nt = tracked.size
@@ -339,7 +348,7 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
             free[f] = (fp, fe)
             n_new = start_tracks(f) if f >= 3 else 0
             free.pop(f - 3, None)
-            history.append({"frame": f, "active": int(active.sum()), "new": n_new, "ended": n_end,
+            history.append({"frame": f, "active": int(active.sum()), "new": n_new, "ended": n_end, **reasons,
                             "untracked": int(free[f][0].shape[0]) if f in free else 0})
             log.debug("STB frame %d: %s", f, history[-1])
             pb.update()

@@ -146,8 +146,16 @@ class OtfTable(Table):
         "or the true ones")
     subvolumes: tuple[PosInt, PosInt, PosInt] = Field((1, 1, 1), description="sub-volumes (n_x, n_y, n_z)")
     window_px: Annotated[int, Field(ge=1, le=10)] = Field(2, description="half width of the fitted window [px]")
-    frames: Annotated[int, Field(ge=1, le=MAX_FRAMES)] = Field(1, description="frames whose particles are fitted")
+    frames: Annotated[int, Field(ge=1, le=MAX_FRAMES)] = Field(
+        8, description="frames whose isolated particles are pooled in the fit (at most the sequence's); dense images "
+        "hold few isolated particle images per frame")
     tolerance_px: PosFloat = Field(0.5, description="triangulation tolerance of the fitted particles [px]")
+    isolation_px: PosFloat | None = Field(
+        None, description="fit only particles with no other particle or image peak closer than this [px] (default "
+        "2 window_px + 2)")
+    refine: Annotated[int, Field(ge=0, le=5)] = Field(
+        0, description="passes re-fitting the OTF on augmented residual images of the particles IPR reconstructs "
+        "with it (frame 0; mitpiv.tracking.refine_otf)")
 
 
 class TrackingTable(Table):
@@ -491,7 +499,7 @@ def _calibration_error_px(cams, true, lo, hi) -> float:
 
 def stage_otf(ctx: StageContext) -> dict:
     from mitpiv.io import write_json
-    from mitpiv.tracking import calibrate_otf, detect_peaks, triangulate
+    from mitpiv.tracking import calibrate_otf_frames, detect_peaks, ipr, refine_otf, triangulate
 
     cfg = ctx.cfg
     o = cfg.otf
@@ -510,20 +518,19 @@ def stage_otf(ctx: StageContext) -> dict:
             p, _, _ = triangulate(peaks, cams, tolerance_px=o.tolerance_px, lower_mm=lo, upper_mm=hi)
         imgs_all.append(imgs)
         pts_all.append(p)
-    # one fit over all frames: the frames' images side by side share every camera's model
-    if len(imgs_all) == 1:
-        images, pts = imgs_all[0], pts_all[0]
-        otf = calibrate_otf(images, cams, pts, lower_mm=lo, upper_mm=hi, subvolumes=o.subvolumes,
-                            window_px=o.window_px)
-    else:
-        fits = [calibrate_otf(i, cams, p, lower_mm=lo, upper_mm=hi, subvolumes=o.subvolumes, window_px=o.window_px)
-                for i, p in zip(imgs_all, pts_all, strict=True)]
-        from mitpiv.tracking import OTF
-
-        otf = OTF(lo, hi, *(np.median([getattr(x, k) for x in fits], axis=0) for k in ("a", "b", "c", "peak")))
+    # one fit over all frames: the isolated particles of every frame are pooled
+    otf = calibrate_otf_frames(imgs_all, cams, pts_all, lower_mm=lo, upper_mm=hi, subvolumes=o.subvolumes,
+                               window_px=o.window_px, isolation_px=o.isolation_px)
+    sigmas = [otf.sigma_max_px()]
+    for _ in range(o.refine):
+        r = ipr(imgs_all[0], cams, otf, lower_mm=lo, upper_mm=hi, tolerance_px=cfg.tracking.tolerance_px,
+                min_intensity=cfg.tracking.min_intensity)
+        otf = refine_otf(imgs_all[0], cams, otf, r.positions_mm, r.intensities, window_px=o.window_px)
+        sigmas.append(otf.sigma_max_px())
     write_json(ctx.out / "otf.json", otf.to_dict())
     return {"sigma_max_px": otf.sigma_max_px(), "peak": [float(np.median(otf.peak[k])) for k in range(otf.n_cameras)],
-            "fitted_from": int(sum(p.shape[0] for p in pts_all)), "source": o.source}
+            "fitted_from": int(sum(p.shape[0] for p in pts_all)), "frames": len(imgs_all), "source": o.source,
+            "sigma_max_px_per_pass": sigmas}
 
 
 def track_images(sequence, cameras, otf, *, dt_s: float, lower_mm, upper_mm, tracking,
