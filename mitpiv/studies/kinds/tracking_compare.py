@@ -315,10 +315,12 @@ def stages(cfg) -> list[Stage]:
     """The opt-in comparison stages of a tracking experiment (none without ``[compare]``)."""
     c = cfg.compare
     out = []
-    if c.openlpt:
-        out.append(Stage("openlpt", ("compare",), stage_openlpt, packages=("openlpt",)))
+    # the peer last: a stage's key holds every earlier stage's output, so new OpenLPT
+    # settings (or version) rerun OpenLPT alone, not the tomographic comparison
     if c.tomo:
         out.append(Stage("tomo", ("compare",), stage_tomo))
+    if c.openlpt:
+        out.append(Stage("openlpt", ("compare",), stage_openlpt, packages=("openlpt",)))
     return out
 
 
