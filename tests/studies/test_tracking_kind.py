@@ -328,3 +328,38 @@ def test_two_particles_whose_images_overlap_in_every_camera_while_crossing():
         q, _ = tr.frame(f)
         for p in (pa[f], pb[f]):
             assert np.min(np.linalg.norm(q - p, axis=1)) < 0.05, (f, p)
+
+
+def test_openlpt_particle_radius_is_the_otf_half_width_at_half_maximum(tmp_path):
+    """OpenLPT's particle radius from the OTF calibration: the half width at half maximum of
+    the widest camera's particle image along its weaker principal axis, rounded up to a half
+    pixel, at least 1.5 px (a 3 x 3 px window); OpenLPT's sample value (2 px) without an OTF
+    calibration."""
+    import json
+
+    from mitpiv.studies.kinds.tracking_compare import particle_radius_px
+
+    assert particle_radius_px(tmp_path) == 2.0  # no otf/otf.json
+    (tmp_path / "otf").mkdir()
+
+    def write(cams):  # cams: (sigma_major_px, sigma_minor_px, angle_rad) per camera
+        a, b, c = [], [], []
+        for s1, s2, th in cams:  # inverse covariance R diag(1/s1^2, 1/s2^2) R^T, written afresh
+            cs, sn = np.cos(th), np.sin(th)
+            a.append(cs**2 / s1**2 + sn**2 / s2**2)
+            b.append(cs * sn * (1 / s1**2 - 1 / s2**2))
+            c.append(sn**2 / s1**2 + cs**2 / s2**2)
+        shape = lambda v: [[[[x]]] for x in v]  # noqa: E731  (camera, z, y, x)
+        (tmp_path / "otf" / "otf.json").write_text(json.dumps(
+            {"a_per_px2": shape(a), "b_per_px2": shape(b), "c_per_px2": shape(c)}))
+
+    fwhm_per_sigma = 2.0 * np.sqrt(2.0 * np.log(2.0))
+    write([(1.1, 0.7, 0.6), (0.9, 0.9, 0.0)])  # widest: sigma 1.1 px -> HWHM 1.295 px -> 1.5 px
+    assert 0.5 * fwhm_per_sigma * 1.1 == pytest.approx(1.2952, abs=1e-4)
+    assert particle_radius_px(tmp_path) == 1.5
+    write([(0.7, 0.6, 1.0)])  # HWHM 0.82 px -> 1.0 px -> at least 1.5 px
+    assert particle_radius_px(tmp_path) == 1.5
+    write([(1.45, 1.2, 0.0), (1.0, 1.0, 0.0)])  # HWHM 1.707 px -> 2.0 px
+    assert particle_radius_px(tmp_path) == 2.0
+    write([(1.75, 1.0, 0.3)])  # HWHM 2.06 px -> 2.5 px
+    assert particle_radius_px(tmp_path) == 2.5

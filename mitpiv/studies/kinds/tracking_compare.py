@@ -41,12 +41,63 @@ reconstruction plus correlation for tomo, after a warm-up that compiles its Numb
 (``seconds.openlpt``, ``seconds.tomo`` in a sweep row).
 
 OpenLPT settings derived from the experiment (``openlpt_settings`` overrides any of
-:class:`mitpiv.io.openlpt.OpenLPTSettings`' fields): OpenLPT's voxel is one pixel in object
-space at the box centre (``mm_per_px``); its initial search radius covers the displacement
-per frame of ``[tracking] velocity_guess_mm_s`` plus ``[tracking] search_px`` (OpenLPT has
-no velocity guess); the predictive-field search radius is 1.5 times that; the 2-D tolerance
-is ``[tracking] tolerance_px``, the 3-D one half of it; the neighbour spacing the mean
-spacing of the particles at frame 0.
+:class:`mitpiv.io.openlpt.OpenLPTSettings`' fields), each from OpenLPT's own documentation or
+source (openlpt 2.2.4; its sources github.com/JHU-NI-LAB/OpenLPT_GUI 2.1.8, the sample
+``test/inputs/test_STB``, the GUI's ``gui/docs/settings.html`` and
+``gui/views/tracking_settings_view.py``):
+
+* voxel: one pixel in object space at the box centre (``mm_per_px``), as OpenLPT's sample
+  (0.04 mm voxels at 0.041 mm/px) and its GUI default (view volume / 1000).
+* particle radius (the "Tracer Radius" the GUI docs call, with the intensity threshold, the
+  setting the user must tune to the experiment): :func:`particle_radius_px`, the half width
+  at half maximum of the particle image of the experiment's OTF calibration (the ``otf``
+  stage, the calibration mitpiv's STB uses) rounded up to a half pixel, and at least 1.5 px,
+  the smallest radius whose subtraction window is centred on the particle. OpenLPT uses the
+  radius three ways (src/srcSTB/Shake.cpp, OTF.cpp): the residual image subtracts each
+  particle over a window ``round(2 r)`` px wide, shaking compares model and image in that
+  window, and its own OTF (the particle image model it shakes with) is fitted in windows of
+  radius ``r`` around every detected peak of the first five frames. With the sample's 2 px
+  the OTF fit takes in the neighbours' images as the density grows: OpenLPT reports
+  ``b = 0.50, 0.41, 0.30`` (``I = a exp(-b x^2 - c y^2)``, a particle image of sigma 1.0,
+  1.1, 1.3 px) at 0.01, 0.02, 0.05 ppp on the same optics (0.64, 0.55, 0.43 with 1.5 px),
+  and the shaking model is as much too wide. On the study's points 1.5 px instead of 2 px
+  raised the yield from 0.93 / 0.68 / 0.10 to 0.95 / 0.80 / 0.21 at 0.01 / 0.02 / 0.05 ppp
+  and lowered the ghost fraction (0.009 / 0.061 / 0.44 to 0.006 / 0.038 / 0.31). 1 px (a
+  2 x 2 px window) went further at 0.02 and 0.05 ppp (0.89, 0.35) but tripled the ghosts at
+  0.01 ppp (0.032). The OTF stage's own half width (0.82, 0.91, 1.39 px at 0.01, 0.02, 0.05
+  ppp) also widens with the density, so it sets the radius only above 1.5 px.
+* initial-phase search radius: the displacement per frame of ``[tracking]
+  velocity_guess_mm_s`` plus ``[tracking] search_px``. OpenLPT links the initial frames to the
+  nearest object within this radius of the position its predictive field predicts
+  (``STB::buildTrackFromPredField``), so ``search_px`` alone would do with a good field; on the
+  study's images it made no difference (``search_px`` = 4 voxels against 8.5: yield 0.110
+  against 0.100 at 0.05 ppp with a 2 px radius, 0.942 against 0.946 at 0.01 ppp with 1.5 px),
+  and the wider radius stays safe where the field is poor.
+* predictive field: OpenLPT's sample grid (51 points per axis); its search radius 1.5 times
+  the initial search radius (``PFParam``'s note: "make sure displacement < 0.5 * r"; the
+  displacement histogram spans +-2 r).
+* IPR: OpenLPT's sample loop counts (2 full-camera loops, 2 per reduced camera set; 4 full
+  loops changed nothing at 0.05 ppp: the tolerance grows by 1.5 per loop); the 2-D tolerance
+  ``[tracking] tolerance_px``, the 3-D one half of it (1 voxel, the sample's, found 34 %
+  instead of 33 % of frame 0's particles at 0.05 ppp, with more ghosts: 43 % against 39 %).
+* ghost threshold ``[tracking] min_intensity`` (0.1, the sample's; the GUI's 0.01 changed
+  nothing): both drop a candidate whose intensity score is below that fraction of the mean
+  (``Shake::runShake``).
+* neighbour spacing: the mean spacing of the particles at frame 0 (its definition in the
+  config, "Avg Interparticle spacing (vox) to identify neighbour tracks").
+* 2-D finder threshold 30 counts and shake width 0.25 voxel: the sample's (its particle
+  images peak at 125 counts; the export's peak near 100-120, OpenLPT's OTF ``a``).
+
+What these do not change (the limits of openlpt 2.2.4 on dense images, observed on the study's
+0.05 ppp point): its residual image is ``min`` over particles of ``image - projection``
+(``Shake::calResidueImage``), not the image minus the sum of all projections, so overlapping
+images are never both removed; its IPR of one frame finds a third to a half of the particles
+(frame 0: 33 % found and 39 % of its candidates more than 1 px from any particle with the 2 px
+radius, whatever the tolerances, loop counts, ghost threshold or shake width; 45 % and 33 %
+with 1.5 px; the particle images overlap: ``N_s`` = ppp x pi x (2 sigma)^2 = 0.3 at sigma
+0.7 px); and a long track ends when its last point lies more
+than ``MAX_ERR_LINEARFIT = 0.05`` world units (mm here, 0.79 px at 0.063 mm/px; 1.2 px in its
+sample) from a line through its last four points, a constant of its source.
 """
 
 from __future__ import annotations
@@ -119,6 +170,36 @@ def _scale(cfg, run: Path) -> float:
     return float(mm_per_px(true, 0.5 * (lo + hi)))
 
 
+#: The smallest OpenLPT particle radius [px] whose subtraction window (``round(2 r)`` px) is
+#: centred on the particle: 3 x 3 px.
+MIN_PARTICLE_RADIUS_PX = 1.5
+
+
+def particle_radius_px(run: Path, *, default: float = 2.0) -> float:
+    """OpenLPT's particle radius [px] for a run: the half width at half maximum of the widest
+    particle image of the experiment's OTF calibration (``otf/otf.json``; along the weaker
+    principal axis of ``exp(-(a du^2 + 2 b du dv + c dv^2) / 2)``: ``sqrt(2 ln 2 / l_min)``,
+    ``l_min`` the smaller eigenvalue of ``[[a, b], [b, c]]``, the largest over cameras and
+    sub-volumes), rounded up to a half pixel, and at least 1.5 px: OpenLPT's subtraction window
+    is ``round(2 r)`` px wide (``Shake::calROIBound``), so 1.5 px is the smallest window centred
+    on the particle (3 x 3 px, the core its peak finder and 3-point Gaussian fit use; 1 px
+    gives 2 x 2). ``default`` (OpenLPT's sample, 2 px) when the run has no OTF calibration.
+    See the module notes for why the radius matters to OpenLPT."""
+    from mitpiv.io import read_json
+
+    f = run / "otf" / "otf.json"
+    if not f.is_file():
+        return default
+    d = read_json(f)
+    a, b, c = (np.asarray(d[k], dtype=np.float64) for k in ("a_per_px2", "b_per_px2", "c_per_px2"))
+    lam = 0.5 * (a + c) - np.sqrt((0.5 * (a - c)) ** 2 + b**2)
+    lam = lam[np.isfinite(lam) & (lam > 0)]
+    if lam.size == 0:
+        return default
+    hwhm = float(np.sqrt(2.0 * np.log(2.0) / lam.min()))
+    return max(MIN_PARTICLE_RADIUS_PX, float(np.ceil(2.0 * hwhm - 1e-9)) / 2.0)
+
+
 def openlpt_settings(cfg, run: Path):
     """The :class:`~mitpiv.io.openlpt.OpenLPTSettings` and voxel [mm] for a run (module notes)."""
     from dataclasses import replace
@@ -129,14 +210,15 @@ def openlpt_settings(cfg, run: Path):
     t = cfg.tracking
     vox = _scale(cfg, run)
     guess = 0.0 if t.velocity_guess_mm_s is None else float(np.linalg.norm(t.velocity_guess_mm_s)) * cfg.flow.dt_s
-    search_vox = guess / vox + t.search_px
+    cover_vox = guess / vox + t.search_px
     p0 = _truth(run)["positions_mm"][0]
     n = max(int(np.all(np.isfinite(p0), axis=1).sum()), 1)
     lo, hi = bounds_of(cfg)
     spacing_mm = float(np.prod(hi - lo) / n) ** (1.0 / 3.0)
-    s = OpenLPTSettings(search_radius_vox=round(search_vox, 3), pred_search_vox=round(1.5 * search_vox, 3),
+    s = OpenLPTSettings(search_radius_vox=round(cover_vox, 3), pred_search_vox=round(1.5 * cover_vox, 3),
                         tolerance_2d_px=t.tolerance_px, tolerance_3d_vox=0.5 * t.tolerance_px,
-                        neighbour_spacing_vox=round(spacing_mm / vox, 3))
+                        neighbour_spacing_vox=round(spacing_mm / vox, 3), ghost_threshold=t.min_intensity,
+                        particle_radius_px=particle_radius_px(run))
     over = {k: (tuple(v) if isinstance(v, list) else v) for k, v in cfg.compare.openlpt_settings.items()}
     return replace(s, **over), vox
 
@@ -329,5 +411,5 @@ def summary(results: dict) -> dict:
     return {k: results[k] for k in ("openlpt", "tomo") if results.get(k) is not None}
 
 
-__all__ = ["CompareTable", "METHODS", "TOMO_NOT_APPLICABLE", "openlpt_settings", "tomo_grid", "bin_vectors",
+__all__ = ["CompareTable", "METHODS", "TOMO_NOT_APPLICABLE", "openlpt_settings", "particle_radius_px", "tomo_grid", "bin_vectors",
            "stage_openlpt", "stage_tomo", "stages", "summary"]
