@@ -64,8 +64,10 @@ source (openlpt 2.2.4; its sources github.com/JHU-NI-LAB/OpenLPT_GUI 2.1.8, the 
   raised the yield from 0.93 / 0.68 / 0.10 to 0.95 / 0.80 / 0.21 at 0.01 / 0.02 / 0.05 ppp
   and lowered the ghost fraction (0.009 / 0.061 / 0.44 to 0.006 / 0.038 / 0.31). 1 px (a
   2 x 2 px window) went further at 0.02 and 0.05 ppp (0.89, 0.35) but tripled the ghosts at
-  0.01 ppp (0.032). The OTF stage's own half width (0.82, 0.91, 1.39 px at 0.01, 0.02, 0.05
-  ppp) also widens with the density, so it sets the radius only above 1.5 px.
+  0.01 ppp (0.032). These runs used mitpiv's OTF calibration before it pooled frames and
+  checked isolation against every image peak, when its half width also widened with the
+  density (0.82, 0.91, 1.39 px at 0.01, 0.02, 0.05 ppp); it now stays near 0.8-0.9 px (the
+  radius is 1.5 px at every density of the study).
 * initial-phase search radius: the displacement per frame of ``[tracking]
   velocity_guess_mm_s`` plus ``[tracking] search_px``. OpenLPT links the initial frames to the
   nearest object within this radius of the position its predictive field predicts
