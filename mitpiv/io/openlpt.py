@@ -104,11 +104,12 @@ class OpenLPTSettings:
     tolerance_2d_px : 2-D matching tolerance [px]; tolerance_3d_vox : 3-D tolerance [voxel].
     reduced_cameras, reduced_loops : cameras left out in reduced loops, and loops per set.
     finder_threshold : 2-D peak threshold in image counts (of ``2**bits - 1``).
-    particle_radius_px : particle image radius for residual images and shaking [px]; OpenLPT
-        also fits its OTF in windows of this radius, and subtracts and shakes in windows
-        ``round(2 r)`` px wide. The sample's 2 px suits its particle images (sigma 0.88 px)
-        at 0.01 ppp; for denser images the window takes in the neighbours (see
-        :func:`mitpiv.studies.kinds.tracking_compare.particle_radius_px`).
+    particle_radius_px : particle image radius for residual images and shaking [px].
+
+    OpenLPT also fits its OTF in windows of ``particle_radius_px``, and subtracts and shakes
+    in windows ``round(2 r)`` px wide. The sample's 2 px suits its particle images (sigma
+    0.88 px) at 0.01 ppp; for denser images the window takes in the neighbours (see
+    :func:`mitpiv.studies.kinds.tracking_compare.particle_radius_px`).
     """
 
     search_radius_vox: float = 10.0

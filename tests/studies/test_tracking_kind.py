@@ -363,3 +363,53 @@ def test_openlpt_particle_radius_is_the_otf_half_width_at_half_maximum(tmp_path)
     assert particle_radius_px(tmp_path) == 2.0
     write([(1.75, 1.0, 0.3)])  # HWHM 2.06 px -> 2.5 px
     assert particle_radius_px(tmp_path) == 2.5
+
+
+def test_otf_from_another_runs_file_and_its_bad_inputs(tiny, tmp_path):
+    """[otf] source = "file": the OTF of another run (e.g. a sparser recording of the same
+    optics) is used as it is; a missing file, a file without source = "file" and an OTF of
+    other cameras are clear errors."""
+    import shutil
+
+    from mitpiv.errors import ConfigError
+    from mitpiv.io import read_json, write_json
+    from mitpiv.studies.runner import run_config
+
+    res, out = tiny
+    run = tmp_path / "run"
+    shutil.copytree(out, run)
+    f = tmp_path / "otf.json"
+    shutil.copy(out / "otf" / "otf.json", f)
+    res2 = run_config(load_experiment(TINY, {"otf.source": "file", "otf.file": str(f)}), run, until="otf")
+    assert res2.stages["otf"]["source"] == "file"
+    assert res2.stages["otf"]["sigma_max_px"] == pytest.approx(res.stages["otf"]["sigma_max_px"], rel=1e-12)
+    with pytest.raises(ConfigError, match=r"\[otf\] file = .* does not exist"):
+        load_experiment(TINY, {"otf.source": "file", "otf.file": str(tmp_path / "none.json")})
+    with pytest.raises(ConfigError, match="source = 'file'"):
+        load_experiment(TINY, {"otf.file": str(f)})
+    d = read_json(f)
+    two = {**d, **{k: d[k][:2] for k in ("a_per_px2", "b_per_px2", "c_per_px2", "peak")}}
+    write_json(tmp_path / "otf2.json", two)
+    with pytest.raises(ConfigError, match="holds 2 cameras"):
+        run_config(load_experiment(TINY, {"otf.source": "file", "otf.file": str(tmp_path / "otf2.json")}), run)
+
+
+def test_otf_calibration_pools_more_frames_when_the_first_hold_too_few(tiny, tmp_path):
+    """With an 11 x 11 px fitted window (isolation 12 px on 160 x 100 px images) one frame
+    holds too few isolated particle images: the stage pools every frame of the sequence and
+    says so in its result. With 13 x 13 px (isolation 14, then 13 px) six frames hold too
+    few too: a clear error naming the ways out."""
+    import shutil
+
+    from mitpiv.errors import CalibrationError
+    from mitpiv.studies.runner import run_config
+
+    res, out = tiny
+    run = tmp_path / "run"
+    shutil.copytree(out, run)
+    res2 = run_config(load_experiment(TINY, {"otf.window_px": 5, "otf.frames": 1}), run, until="otf")
+    o = res2.stages["otf"]
+    assert o["frames"] == 6 and o["isolation_px"] == 12.0
+    assert o["sigma_max_px"] == pytest.approx(res.stages["otf"]["sigma_max_px"], rel=0.15)
+    with pytest.raises(CalibrationError, match=r'too dense .*\[otf\] source = "file"'):
+        run_config(load_experiment(TINY, {"otf.window_px": 6, "otf.frames": 1}), run, until="otf")

@@ -68,6 +68,8 @@ Bounds = tuple[float, float, float, float, float, float]
 STB_MIN_FRAMES = 4
 #: Most frames of one experiment (a bound on the truth arrays and the rendering).
 MAX_FRAMES = 2000
+#: Most frames the OTF calibration pools when the first [otf] frames hold too few isolated particles.
+OTF_MAX_FRAMES = 32
 
 
 # ------------------------------------------------------------------------------- schema
@@ -141,9 +143,13 @@ class CalibrationTable(Table):
 class OtfTable(Table):
     """Calibration of the particle image model (mitpiv.tracking.otf.calibrate_otf)."""
 
-    source: Literal["images", "truth"] = Field(
+    source: Literal["images", "truth", "file"] = Field(
         "images", description="3D positions of the fitted particles: triangulated in the images (as in an experiment) "
-        "or the true ones")
+        "or the true ones; or 'file': the OTF of another run ([otf] file), e.g. a sparser recording of the same optics")
+    file: str | None = Field(None, description="source = 'file': an otf.json written by the otf stage of another run "
+                                               "(RUN/otf/otf.json), relative to the experiment's folder")
+    file_sha256: str | None = Field(None, description="set by mitpiv: the file's content hash (a changed file reruns "
+                                                      "the stage)")
     subvolumes: tuple[PosInt, PosInt, PosInt] = Field((1, 1, 1), description="sub-volumes (n_x, n_y, n_z)")
     window_px: Annotated[int, Field(ge=1, le=10)] = Field(2, description="half width of the fitted window [px]")
     frames: Annotated[int, Field(ge=1, le=MAX_FRAMES)] = Field(
@@ -156,6 +162,13 @@ class OtfTable(Table):
     refine: Annotated[int, Field(ge=0, le=5)] = Field(
         0, description="passes re-fitting the OTF on augmented residual images of the particles IPR reconstructs "
         "with it (frame 0; mitpiv.tracking.refine_otf)")
+
+    @model_validator(mode="after")
+    def _file(self):
+        if (self.source == "file") != (self.file is not None):
+            raise ValueError(f"give [otf] file together with source = 'file' (got source = {self.source!r}, file = "
+                             f"{self.file!r})")
+        return self
 
 
 class TrackingTable(Table):
@@ -249,8 +262,19 @@ def schema():
 
 
 def prepare(raw: dict, base_dir: Path) -> dict:
-    """Resolve the scene XML against the experiment's folder (before validation)."""
-    return resolve_scene_xml(raw, base_dir)
+    """Resolve the scene XML and an [otf] file against the experiment's folder (before
+    validation); the OTF file's content hash joins the otf table."""
+    raw = resolve_scene_xml(raw, base_dir)
+    otf = raw.get("otf")
+    if isinstance(otf, dict) and isinstance(otf.get("file"), str):
+        import hashlib
+
+        f = (base_dir / otf["file"]).resolve()
+        if not f.is_file():
+            raise ConfigError(f"experiment: [otf] file = {otf['file']!r} does not exist (resolved to {f}); give the "
+                              f"otf.json of another run's otf stage (RUN/otf/otf.json).")
+        raw = {**raw, "otf": {**otf, "file": str(f), "file_sha256": hashlib.sha256(f.read_bytes()).hexdigest()}}
+    return raw
 
 
 # ------------------------------------------------------------------------------- helpers
@@ -505,22 +529,58 @@ def stage_otf(ctx: StageContext) -> dict:
     o = cfg.otf
     cams = load_cameras(ctx.run_dir)
     lo, hi = bounds_of(cfg)
+    if o.source == "file":
+        from mitpiv.io import read_json
+        from mitpiv.tracking import OTF
+
+        try:
+            otf = OTF.from_dict(read_json(o.file))
+        except (KeyError, TypeError, ValueError) as e:
+            raise ConfigError(f"experiment: [otf] file = {o.file!r} is not an otf.json of the otf stage ({e}).") from None
+        if otf.n_cameras != len(cams):
+            raise ConfigError(f"experiment: [otf] file = {o.file!r} holds {otf.n_cameras} cameras, the experiment "
+                              f"{len(cams)}; give the OTF of a run with the same cameras.")
+        write_json(ctx.out / "otf.json", otf.to_dict())
+        return {"sigma_max_px": otf.sigma_max_px(), "peak": [float(np.median(otf.peak[k])) for k in range(len(cams))],
+                "source": "file", "file": o.file}
     truth = _truth(ctx.run_dir) if o.source == "truth" else None
-    frames = range(min(o.frames, cfg.sequence.frames))
     imgs_all, pts_all = [], []
-    for f in frames:
-        imgs, _ = frame_images(ctx.run_dir, f)
-        if o.source == "truth":
-            p = truth["positions_mm"][f]
-            p = p[np.all(np.isfinite(p), axis=1)]
-        else:
-            peaks = [detect_peaks(i)[0] for i in imgs]
-            p, _, _ = triangulate(peaks, cams, tolerance_px=o.tolerance_px, lower_mm=lo, upper_mm=hi)
-        imgs_all.append(imgs)
-        pts_all.append(p)
-    # one fit over all frames: the isolated particles of every frame are pooled
-    otf = calibrate_otf_frames(imgs_all, cams, pts_all, lower_mm=lo, upper_mm=hi, subvolumes=o.subvolumes,
-                               window_px=o.window_px, isolation_px=o.isolation_px)
+
+    def load(n):  # the first n frames' images and fitted positions
+        for f in range(len(imgs_all), n):
+            imgs, _ = frame_images(ctx.run_dir, f)
+            if o.source == "truth":
+                p = truth["positions_mm"][f]
+                p = p[np.all(np.isfinite(p), axis=1)]
+            else:
+                peaks = [detect_peaks(i)[0] for i in imgs]
+                p, _, _ = triangulate(peaks, cams, tolerance_px=o.tolerance_px, lower_mm=lo, upper_mm=hi)
+            imgs_all.append(imgs)
+            pts_all.append(p)
+        return imgs_all[:n], pts_all[:n]
+
+    # one fit over the frames: the isolated particles of every frame are pooled. Dense images
+    # hold few isolated particle images: without a given isolation_px, more frames (up to
+    # OTF_MAX_FRAMES), then the closest isolation that keeps the neighbours out of the fitted
+    # window (2 window_px + 1: a neighbour's image centre at least 3 px beyond the window)
+    n_all = min(cfg.sequence.frames, max(o.frames, OTF_MAX_FRAMES))
+    tries = [(min(o.frames, cfg.sequence.frames), o.isolation_px)]
+    if o.isolation_px is None:
+        tries += [(n_all, None), (n_all, 2.0 * o.window_px + 1)]
+    for k, (n, iso) in enumerate(tries):
+        try:
+            imgs, pts = load(n)
+            otf = calibrate_otf_frames(imgs, cams, pts, lower_mm=lo, upper_mm=hi, subvolumes=o.subvolumes,
+                                       window_px=o.window_px, isolation_px=iso)
+            used = (n, 2.0 * o.window_px + 2 if iso is None else float(iso))
+            break
+        except CalibrationError as e:
+            if k == len(tries) - 1:
+                raise CalibrationError(
+                    f"experiment: [otf] the images are too dense to calibrate the particle image model from isolated "
+                    f"particles ({e}). Calibrate it from a sparser recording of the same optics and give its "
+                    f"OTF ([otf] source = \"file\", file = \"RUN/otf/otf.json\"), or [otf] source = \"truth\" "
+                    f"(a diagnostic: true positions).") from None
     sigmas = [otf.sigma_max_px()]
     for _ in range(o.refine):
         r = ipr(imgs_all[0], cams, otf, lower_mm=lo, upper_mm=hi, tolerance_px=cfg.tracking.tolerance_px,
@@ -529,7 +589,8 @@ def stage_otf(ctx: StageContext) -> dict:
         sigmas.append(otf.sigma_max_px())
     write_json(ctx.out / "otf.json", otf.to_dict())
     return {"sigma_max_px": otf.sigma_max_px(), "peak": [float(np.median(otf.peak[k])) for k in range(otf.n_cameras)],
-            "fitted_from": int(sum(p.shape[0] for p in pts_all)), "frames": len(imgs_all), "source": o.source,
+            "fitted_from": int(sum(p.shape[0] for p in pts_all[:used[0]])), "frames": used[0],
+            "isolation_px": used[1], "source": o.source,
             "sigma_max_px_per_pass": sigmas}
 
 
