@@ -301,18 +301,25 @@ def resolve_scene_xml(raw: dict, base_dir: Path) -> dict:
     return raw
 
 
+def resolve_table_file(raw: dict, table: str, base_dir: Path, *, hint: str = "") -> dict:
+    """``[table] file`` resolved against the experiment's folder (before validation), with its
+    content hash as ``file_sha256`` (part of the stage keys: a changed file reruns); a missing
+    file is a ConfigError naming the key, the resolved path and ``hint``."""
+    t = raw.get(table)
+    if isinstance(t, dict) and isinstance(t.get("file"), str):
+        import hashlib
+
+        f = (base_dir / t["file"]).resolve()
+        if not f.is_file():
+            raise ConfigError(f"experiment: [{table}] file = {t['file']!r} does not exist (resolved to {f}){hint}.")
+        raw = {**raw, table: {**t, "file": str(f), "file_sha256": hashlib.sha256(f.read_bytes()).hexdigest()}}
+    return raw
+
+
 def prepare(raw: dict, base_dir: Path) -> dict:
     """Resolve the scene XML and a particle list against the experiment's folder (before
     validation); the particle list's content hash joins the seeding table."""
-    raw = resolve_scene_xml(raw, base_dir)
-    seeding = raw.get("seeding")
-    if isinstance(seeding, dict) and isinstance(seeding.get("file"), str):
-        import hashlib
-
-        f = (base_dir / seeding["file"]).resolve()
-        if not f.is_file():
-            raise ConfigError(f"experiment: [seeding] file = {seeding['file']!r} does not exist (resolved to {f}).")
-        raw = {**raw, "seeding": {**seeding, "file": str(f), "file_sha256": hashlib.sha256(f.read_bytes()).hexdigest()}}
+    raw = resolve_table_file(resolve_scene_xml(raw, base_dir), "seeding", base_dir)
     if raw.get("kind") == "particles":
         raw = {**raw, "kind": "tomo"}
     return raw

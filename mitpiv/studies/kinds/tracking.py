@@ -55,7 +55,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from mitpiv.errors import CalibrationError, ConfigError
-from mitpiv.studies.kinds.tomo import SceneTable, resolve_scene_xml
+from mitpiv.studies.kinds.tomo import SceneTable, resolve_scene_xml, resolve_table_file
 from mitpiv.studies.kinds.tracking_compare import CompareTable
 from mitpiv.studies.runner import RENDER_PACKAGES, Kind, Stage, StageContext
 from mitpiv.studies.schema import Table, Vec3
@@ -264,17 +264,8 @@ def schema():
 def prepare(raw: dict, base_dir: Path) -> dict:
     """Resolve the scene XML and an [otf] file against the experiment's folder (before
     validation); the OTF file's content hash joins the otf table."""
-    raw = resolve_scene_xml(raw, base_dir)
-    otf = raw.get("otf")
-    if isinstance(otf, dict) and isinstance(otf.get("file"), str):
-        import hashlib
-
-        f = (base_dir / otf["file"]).resolve()
-        if not f.is_file():
-            raise ConfigError(f"experiment: [otf] file = {otf['file']!r} does not exist (resolved to {f}); give the "
-                              f"otf.json of another run's otf stage (RUN/otf/otf.json).")
-        raw = {**raw, "otf": {**otf, "file": str(f), "file_sha256": hashlib.sha256(f.read_bytes()).hexdigest()}}
-    return raw
+    return resolve_table_file(resolve_scene_xml(raw, base_dir), "otf", base_dir,
+                              hint="; give the otf.json of another run's otf stage (RUN/otf/otf.json)")
 
 
 # ------------------------------------------------------------------------------- helpers
