@@ -1,6 +1,7 @@
 """The tracking comparison study (issue 27, item 7): a ``mitpiv sweep`` of a tracking
 experiment with ``[compare] openlpt = true, tomo = true`` over particles per pixel, turned into
-``results.json`` (one row per method and density) and one figure per metric against ppp.
+``results.json`` (one row per method and density), ``report.md`` (the rows as a table) and one
+figure per metric against ppp.
 
     mitpiv sweep scenes/tracking_lpt/study.toml --out out/tracking_ppp --tracking-results docs/studies/tracking
 
@@ -180,4 +181,30 @@ def write_tracking_study(sweep_dir, out_dir) -> dict:
         figures.append(f"{metric}.png")
     doc = {"sweep": str(sweep), "definitions": __doc__.split("Rows")[1].strip(), "rows": rows, "figures": figures}
     write_json(out / "results.json", doc)
+    _write_report(rows, figures, out / "report.md")
     return doc
+
+
+def _fmt(x, spec):
+    return "n/a" if x is None else format(x, spec)
+
+
+def _write_report(rows, figures, path) -> None:
+    """``report.md``: one table line per method and density (the rows of results.json) and
+    the figures."""
+    from mitpiv.io import write_text
+
+    lines = ["# Tracking against particle image density", "",
+             "One row per method and density (`results.json`; definitions there). Yield, ghosts and position "
+             "error by the LPT Challenge's definitions; velocity error on the shared Eulerian grid, relative to "
+             "the RMS bin speed; wall time of the method's own work.", "",
+             "| ppp | method | status | yield | ghost fraction | position error [px] | velocity error | wall [s] |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in sorted(rows, key=lambda r: (r.get("ppp") or 0.0, r["method"])):
+        status = r.get("status", "ok") if r.get("status", "ok") == "ok" else f"{r['status']}: {r.get('error', '')}"
+        lines.append(f"| {_fmt(r.get('ppp'), 'g')} | {r['method']} | {status.replace('|', '/')} | "
+                     f"{_fmt(r.get('yield'), '.3f')} | {_fmt(r.get('ghost_fraction'), '.4f')} | "
+                     f"{_fmt(r.get('position_error_px'), '.3f')} | {_fmt(r.get('velocity_error'), '.4f')} | "
+                     f"{_fmt(r.get('wall_s'), '.0f')} |")
+    lines += ["", *[f"![{f}]({f})" for f in figures], ""]
+    write_text(path, "\n".join(lines))

@@ -270,6 +270,10 @@ def test_openlpt_and_tomo_on_the_same_images_and_the_study_table(tiny, tmp_path)
     assert json.loads((tmp_path / "docs" / "results.json").read_text())["rows"] == doc["rows"]
     for metric, _, _ in METRICS:
         assert (tmp_path / "docs" / f"{metric}.png").stat().st_size > 1000, metric
+    report = (tmp_path / "docs" / "report.md").read_text()
+    for m in ("mitpiv-stb", "openlpt-stb", "mitpiv-tomo"):
+        assert sum(line.split("|")[2].strip() == m for line in report.splitlines() if line.startswith("| ")) == 1, m
+    assert f"| {rows['mitpiv-stb']['yield']:.3f} |" in report
 
 
 def test_an_openlpt_failure_is_a_row_with_its_reason(tiny, tmp_path):
