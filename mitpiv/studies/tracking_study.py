@@ -40,7 +40,11 @@ from pathlib import Path
 
 from mitpiv.errors import FileFormatError
 
-__all__ = ["study_rows", "write_tracking_study", "METRICS"]
+__all__ = ["study_rows", "write_tracking_study", "METRICS", "PUBLISHED_LIMITS"]
+
+#: Published density limits drawn on the yield and ghost figures: (ppp, label, line style).
+PUBLISHED_LIMITS = ((0.125, "STB ghost-free limit, Schanz et al. 2016 (0.125)", "--"),
+                    (0.14, "IPR ghost-free limit, Jahn et al. 2021 (0.14)", ":"))
 
 #: The metrics plotted against ppp: (column, axis label, log scale).
 METRICS = (("yield", "yield", False), ("ghost_fraction", "ghost fraction", False),
@@ -153,9 +157,12 @@ def _plot(rows, metric, label, log, path):
         ax.set_ylim(0, 1.02)
     elif metric == "ghost_fraction":
         ax.set_ylim(bottom=0)
+    if metric in ("yield", "ghost_fraction"):
+        for ppp, name, style in PUBLISHED_LIMITS:
+            ax.axvline(ppp, color="0.4", ls=style, lw=1.0, label=name)
     ax.grid(True, which="both", alpha=0.3)
     if drawn:
-        ax.legend()
+        ax.legend(fontsize=7)
     else:
         ax.text(0.5, 0.5, "no values", transform=ax.transAxes, ha="center")
     fig.tight_layout()
