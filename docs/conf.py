@@ -9,7 +9,8 @@ they cannot drift from the code and the files they show:
   (the same text as ``mitpiv schema``);
 - ``examples.md``: every script in ``examples/``, its docstring, its source and its figure
   (``docs/examples/<script>.png``, made by ``python examples/<script>.py``);
-- ``replications.md`` and ``benchmarks.md``: whatever exists under ``docs/replications/`` and
+- ``replications.md``, ``studies.md`` and ``benchmarks.md``: whatever exists under ``docs/replications/``,
+  ``docs/studies/`` and
   ``docs/benchmarks.md`` (and the accuracy-versus-time report in ``docs/accuracy-time/``).
 """
 
@@ -32,7 +33,7 @@ extensions = ["myst_parser", "sphinx.ext.autodoc", "numpydoc", "sphinx.ext.mathj
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
 myst_enable_extensions = ["dollarmath", "colon_fence"]
 myst_heading_anchors = 3
-exclude_patterns = ["_build", "examples/*.md", "replications/**", "accuracy-time/**", "benchmarks.md"]
+exclude_patterns = ["_build", "examples/*.md", "replications/**", "studies/**", "accuracy-time/**", "benchmarks.md"]
 html_theme = "alabaster"
 html_title = "mitpiv"
 html_theme_options = {"description": "physically based rendering testbed for volumetric PIV", "page_width": "1100px",
@@ -108,6 +109,18 @@ def _replications_page() -> str:
     return "\n".join(parts)
 
 
+def _studies_page() -> str:
+    parts = ["# Study reports", "",
+             "Sweeps whose results are committed (`mitpiv sweep STUDY --tracking-results DIR` and the like); the "
+             "reports below are the files under `docs/studies/`.", ""]
+    reports = sorted((DOCS / "studies").glob("**/*.md")) if (DOCS / "studies").is_dir() else []
+    if not reports:
+        parts += ["No study report has been committed yet.", ""]
+    for r in reports:
+        parts += _include(r, heading_shift=True)
+    return "\n".join(parts)
+
+
 def _benchmarks_page() -> str:
     parts = ["# Benchmarks", "", "Measured wall times and accuracies (`make bench`, `mitpiv bench accuracy-time`).",
              ""]
@@ -125,6 +138,7 @@ def _generate(app) -> None:
     _write("schema.md", _schema_page())
     _write("examples.md", _examples_page())
     _write("replications.md", _replications_page())
+    _write("studies.md", _studies_page())
     _write("benchmarks.md", _benchmarks_page())
 
 
