@@ -266,6 +266,40 @@ def pooled_statistics(results: list[dict], window: int) -> dict:
         out[ref] = {k: np.asarray(st[k]).tolist() for k in ("y_plus", "n", "U", "u_rms", "v_rms", "w_rms", "uv")}
     out["err_avg"] = statistics_error_percent(out["meas"], out["avg"])
     out["err_dns"] = statistics_error_percent(out["meas"], out["dns"])
+    out["decomposition"] = error_decomposition(y, *(np.concatenate([np.asarray(v[ref], dtype=float).reshape(-1, 3)
+                                                                    for v in vec]) @ ch.frame
+                                                    for ref in ("meas", "avg", "dns")))
+    return out
+
+
+def error_decomposition(y_plus, meas, avg, dns, band_y_plus=(100.0, 200.0)) -> dict:
+    """Split the measured fluctuation into a modulation and a random part, per vector layer.
+
+    In each layer (vectors of one y+), for each component (frame axes: streamwise,
+    wall-normal, spanwise), the measured fluctuation m' is regressed on the window-averaged
+    truth's a': ``m' = beta a' + r``. ``beta`` < 1 is a modulation (the measurement regresses
+    towards the layer mean: spatial filtering beyond the window, ghost particles that move
+    with the line-of-sight average); ``r`` is the random error, uncorrelated with the truth.
+    Then ``rms(m) / rms(a) = sqrt(beta^2 + (rms r / rms a)^2)``: the two effects cancel in
+    part, and the Table 1 error is ``|that - 1|``. Returned per component (keys u_rms, v_rms,
+    w_rms as :func:`mitpiv.analysis.channel.wall_statistics`), means over the layers in the
+    band: ``slope``, ``slope_min``, ``resid`` (rms r / rms a) and ``filter_pct``, the signed
+    percentage by which the window-averaged truth's rms differs from the point truth's (the
+    window's own attenuation, part of every error against the point truth)."""
+    y = np.round(np.asarray(y_plus, dtype=float), 6)
+    layers = [v for v in np.unique(y) if band_y_plus[0] < v < band_y_plus[1]]
+    out = {}
+    for c, key in enumerate(("u_rms", "v_rms", "w_rms")):
+        slope, resid, filt = [], [], []
+        for v in layers:
+            s = y == v
+            m, a, d = (x[s, c] - x[s, c].mean() for x in (meas, avg, dns))
+            beta = float(a @ m / (a @ a))
+            slope.append(beta)
+            resid.append(float(np.sqrt(np.mean((m - beta * a) ** 2) / np.mean(a**2))))
+            filt.append(float(100 * (np.sqrt(np.mean(a**2) / np.mean(d**2)) - 1)))
+        out[key] = {"slope": float(np.mean(slope)), "slope_min": float(np.min(slope)),
+                    "resid": float(np.mean(resid)), "filter_pct": float(np.mean(filt))}
     return out
 
 
@@ -296,10 +330,17 @@ def _stats_part(ctx, sc, get, rows, curves, figures, sections, system):
                 rid = f"{name}_err_{ref}_lv{_f(lv)}"
                 ours = errs[ref][name][lvs.index(lv)] if lv in lvs else float("nan")
                 what = "window-averaged truth" if ref == "avg" else "point truth at the vector centres"
+                note = "not run at this scale"
+                if lv in lvs:
+                    dec = prof[lv]["decomposition"].get(STAT_KEY[name])
+                    note = "" if dec is None else (
+                        f"modulation slope {dec['slope']:.2f} (lowest layer {dec['slope_min']:.2f}), random error "
+                        f"{dec['resid']:.2f} of the truth rms" + (f"; the window alone changes the truth rms by "
+                                                                   f"{dec['filter_pct']:+.1f} %" if ref == "dns" else ""))
                 rows.append(compare_value(rid, f"{name}+ error vs {what}, 100 < y+ < 200, l_v+ = {lv}", "Table 1",
                                           paper, ours, unit="%", abs=max(1.0, 0.5 * paper),
                                           why="patches of one synthetic field; half the paper's value or 1 point",
-                                          note="" if lv in lvs else "not run at this scale"))
+                                          note=note))
     if len(lvs) >= 2:
         i_hi, i_lo = lvs.index(max(lvs)), lvs.index(min(lvs))
         fall = errs["avg"]["uprime"][i_lo] < errs["avg"]["uprime"][i_hi]
@@ -311,7 +352,10 @@ def _stats_part(ctx, sc, get, rows, curves, figures, sections, system):
              for i in range(len(lvs))]
     rows.append(compare_trend("vw_worse_than_u", "v'+ and w'+ errors above u'+ (averaged truth) at every voxel size",
                               "Table 1", "yes at every l_v+", f"{sum(worse)} of {len(worse)} voxel sizes", all(worse),
-                              tolerance="ordering"))
+                              tolerance="ordering",
+                              note="our u'+ error is mostly modulation of the lowest layers (slope below 1, see the "
+                                   "Table 1 section); the larger spanwise random error is partly cancelled by its "
+                                   "own modulation"))
     # figure: profiles in wall units, Table 1 beside
     fig, axes = plt.subplots(len(lvs), 4, figsize=(13, 3.1 * len(lvs)), squeeze=False)
     for i, lv in enumerate(lvs):
@@ -362,30 +406,47 @@ def _stats_part(ctx, sc, get, rows, curves, figures, sections, system):
 
 
 def _diagnosis(prof: dict, sc: dict, system) -> str:
-    """Why the Table 1 errors are what they are: the measurement's random error (implied by
-    meas^2 - avg^2) against the spread of the window-averaged truth within the patches."""
-    lines = ["| l_v+ | component | truth rms in the patches (avg) | DNS table rms | implied PIV random error "
-             "[u_tau] | [voxels] | error at the DNS table's spread [%] |", "|---|---|---|---|---|---|---|"]
+    """Why the Table 1 errors are what they are (:func:`error_decomposition` of the pooled
+    vectors, the window's attenuation of the truth, the patches' truth spread against the DNS
+    table)."""
+    lines = ["| l_v+ | component | slope beta (mean / lowest layer) | random error / truth rms | "
+             "sqrt(beta^2 + r^2) - 1 [%] | error vs averaged truth [%] | window-averaged vs point truth rms [%] | "
+             "patches' point-truth rms vs DNS table [%] |", "|---|---|---|---|---|---|---|---|"]
     tab = system.channel(0).profile_table
-    dtp = system.displacement_plus / float(tab.mean_plus(np.array([system.center_y_plus]))[0])  # dt+
+    comps = (("u (streamwise)", "u_rms", 0), ("w (wall-normal)", "v_rms", 1), ("v (spanwise)", "w_rms", 2))
+    filt, spread = {}, []
     for lv, p in prof.items():
-        y = np.asarray(p["avg"]["y_plus"])
+        y = np.asarray(p["dns"]["y_plus"])
         band = (y > 100) & (y < 200)
-        for name, key in (("u (streamwise)", "u_rms"), ("w (wall-normal)", "v_rms"), ("v (spanwise)", "w_rms")):
-            m, a = np.asarray(p["meas"][key])[band], np.asarray(p["avg"][key])[band]
-            noise = float(np.mean(np.sqrt(np.maximum(m**2 - a**2, 0.0))))
-            dns = float(np.mean(tab.rms_plus(y[band])[:, {"u_rms": 0, "v_rms": 1, "w_rms": 2}[key]]))
-            at_dns = 100 * (math.sqrt(1 + (noise / dns) ** 2) - 1)
-            lines.append(f"| {lv} | {name} | {float(np.mean(a)):.3f} | {dns:.3f} | {noise:.3f} | "
-                         f"{noise * dtp / lv:.3f} | {at_dns:.2f} |")
-    return ("**Why our errors differ.** A Table 1 error is set by the measurement's random error e against the "
-            "truth's spread s in the sample: |sqrt(s^2 + e^2) - s| / s. The paper's sample is a ~1000+ x 1000+ "
-            "plane; ours are patches of "
-            f"{sc['stats_crop']:g}+, which hold only part of the turbulent spread (the large scales are longer "
-            "than a patch), so the same e gives a larger error. The implied e (from meas^2 - avg^2) is the "
-            "simulator's PIV random error, comparable with tomographic PIV practice (0.1-0.3 voxel); the last "
-            "column is the error the same e would give against the full (DNS table) spread, the number to set "
-            "beside the paper's Table 1:\n\n"
+        for name, key, c in comps:
+            d = p["decomposition"][key]
+            pred = 100 * (math.sqrt(d["slope"] ** 2 + d["resid"] ** 2) - 1)
+            dev = 100 * (np.asarray(p["dns"][key])[band] / tab.rms_plus(y[band])[:, c] - 1)
+            spread.append(float(np.max(np.abs(dev))))
+            filt.setdefault(key, []).append(d["filter_pct"])
+            lines.append(f"| {lv} | {name} | {d['slope']:.3f} / {d['slope_min']:.3f} | {d['resid']:.3f} | "
+                         f"{pred:+.1f} | {p['err_avg'][key]:.2f} | {d['filter_pct']:+.1f} | "
+                         f"{float(np.min(dev)):+.0f} to {float(np.max(dev)):+.0f} |")
+    lvs = list(prof)
+    lo, hi = min(lvs), max(lvs)
+    sl = {lv: prof[lv]["decomposition"]["u_rms"]["slope_min"] for lv in lvs}
+    fu = filt["u_rms"]
+    return ("**Why our errors differ.** Each layer's measured fluctuation is regressed on the window-averaged "
+            "truth's, m' = beta a' + r (`error_decomposition`): beta < 1 is a modulation (the measurement "
+            "regresses towards the layer mean), r the random error. The rms ratio is sqrt(beta^2 + r^2), so the "
+            "two cancel in part and Table 1's error is what is left of either. Ours has both. The streamwise "
+            f"slope falls to {sl[hi]:.2f} in the lowest layer at l_v+ {hi} and rises to {sl[lo]:.2f} at l_v+ {lo}, "
+            "as Q rises: the signature of ghost particles, which move with the average velocity along their lines "
+            "of sight (Elsinga et al. 2011) and so pull each layer towards the volume's mean; the random part is "
+            "largest for the spanwise component. The window's own attenuation of the truth (last-but-one column) "
+            "is part of every error against the point truth ('dns'): in our synthetic turbulence the 20+ window "
+            f"changes u'+ by {min(fu):+.1f} to {max(fu):+.1f} %, against a gap of 0.7-2.2 points between the "
+            "paper's 'avg' and 'dns' u'+ errors, so the synthetic spectrum holds more streamwise energy below 20+ "
+            "than the DNS and our u'+ errors against the point truth are larger than the paper's for that reason. "
+            f"Last column: the {len(sc['seeds'])} patches of {sc['stats_crop']:g}+ sample the turbulence's large "
+            f"scales poorly (the paper's plane is ~1000+), so their truth rms departs from the DNS table by up to "
+            f"{max(spread):.0f} %; every error here is against the patches' own truth, so this moves the "
+            "denominators, not the comparison.\n\n"
             + "\n".join(lines))
 
 
@@ -440,6 +501,7 @@ def _seeding_part(ctx, sc, get, rows, curves, figures, sections):
     for w in sc["sd_windows"]:
         a2.semilogx(sd_x[w], sd_err[w], "o-", label=f"I = {w} voxels")
     a2.axvline(1.4e-4, color="0.6", ls=":", label="paper optimum")
+    a2.xaxis.set_minor_formatter(plt.NullFormatter())  # minor labels of a short log axis overlap
     a2.set_xlabel("S_d [1/voxel^3]")
     a2.set_ylabel("u'+ error [%]")
     a2.legend(fontsize=7)
@@ -475,7 +537,12 @@ def _camera_part(ctx, sc, get, rows, curves, figures, sections, system):
     band = [q[a, b] / qmax for a, p in enumerate(ph) for b, t in enumerate(th) if 50 <= p <= 60 and 20 <= t <= 25]
     if band:
         rows.append(compare_trend("Q_band_over_Qmax", "smallest Q/Q_max within 50 < phi < 60, 20 < theta < 25",
-                                  "Fig. 15", "> 0.95", min(band), min(band) > 0.95, tolerance="the paper's 0.95 line"))
+                                  "Fig. 15", "> 0.95", min(band), min(band) > 0.95, tolerance="the paper's 0.95 line",
+                                  note="Q/Q_max in the band: " + ", ".join(
+                                      f"({t:g}, {p:g}): {q[a, b] / qmax:.2f}" for a, p in enumerate(ph)
+                                      for b, t in enumerate(th) if 50 <= p <= 60 and 20 <= t <= 25)
+                                  + "; our Q falls off faster around the optimum than the paper's (one realisation "
+                                    "per pose on a 40+ crop)"))
     asym = [(q[a, b], q[a, th.index(90 - t)]) for a, _ in enumerate(ph) for b, t in enumerate(th)
             if t < 45 and (90 - t) in th]
     if asym:
@@ -496,7 +563,10 @@ def _camera_part(ctx, sc, get, rows, curves, figures, sections, system):
     ratio = float(np.mean(np.array(f) / np.maximum(b, 1e-9)))
     rows.append(compare_value("Q_forward_over_backward_phi55", "mean over theta of Q forward / Q backward, phi = 55",
                               "Fig. 20", 1.10, ratio, abs=0.05, why="'approximately 10 %'",
-                              note="paper's Mie scaling; " + ", ".join(f"{t:g}: {x:.3f}/{y:.3f}" for t, x, y in
+                              note="paper's Mie scaling; mean over theta <= 35: "
+                              + f"{float(np.mean([x / max(y, 1e-9) for t, x, y in zip(sc['fb_thetas'], f, b, strict=True) if t <= 35])):.3f}"
+                              + " (the ratio grows beyond 45, where the paper's function darkens the backward "
+                                "cameras towards the noise); " + ", ".join(f"{t:g}: {x:.3f}/{y:.3f}" for t, x, y in
                                                                        zip(sc["fb_thetas"], f, b, strict=True))))
     f2, b2 = fb["physical"]
     ratio2 = float(np.mean(np.array(f2) / np.maximum(b2, 1e-9)))
