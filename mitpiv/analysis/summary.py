@@ -4,7 +4,7 @@ against the true volume or particles, and the numbers kept from a velocity-error
 from __future__ import annotations
 
 from mitpiv.analysis.particles import MatchResult, find_particles, match
-from mitpiv.analysis.quality import plane_snr, quality_q, quality_q_zero_mean, rank_correlation, truth_volume
+from mitpiv.analysis.quality import plane_snr, quality_q, quality_q_zero_mean, rank_correlations, truth_volume
 
 VELOCITY_ERROR_KEYS = ("rms", "bias", "rms_vox", "bias_vox", "rms_magnitude", "n", "outlier_ratio", "units")
 #: The keys of :func:`volume_quality`, in order.
@@ -30,9 +30,9 @@ def volume_quality(volume, truth_volume) -> dict:
         normalised SNR (eq. 4.4) needs a reference configuration's SNR:
         :func:`~mitpiv.analysis.normalised_snr`.
     """
+    q_rank, spearman = rank_correlations(volume, truth_volume)
     return {"Q": quality_q(volume, truth_volume), "Q*": quality_q_zero_mean(volume, truth_volume),
-            "Q'": rank_correlation(volume, truth_volume),
-            "Q'_spearman": rank_correlation(volume, truth_volume, centred=True), "SNR": plane_snr(volume)}
+            "Q'": q_rank, "Q'_spearman": spearman, "SNR": plane_snr(volume)}
 
 
 def evaluate_volume(volume, grid, truth_mm, *, method: str = "gauss3", threshold_rel: float = 0.1,

@@ -243,13 +243,44 @@ class VortexRing(_Axisymmetric):
         phi = (np.arange(self.segments) + 0.5) * (2 * math.pi / self.segments)
         xs = c + big_r * (np.cos(phi)[:, None] * self._e1 + np.sin(phi)[:, None] * self._e2)
         dl = (2 * math.pi * big_r / self.segments) * (-np.sin(phi)[:, None] * self._e1 + np.cos(phi)[:, None] * self._e2)
-        out = np.empty_like(p)
-        chunk = max(1, 2_000_000 // self.segments)
-        for s in range(0, p.shape[0], chunk):  # chunks bound memory; each chunk is vectorised
-            rel = p[s : s + chunk, None, :] - xs[None, :, :]
+        pts = np.ascontiguousarray(p, dtype=np.float64)
+        out = np.empty_like(pts)
+        if pts.shape[0] * self.segments < 50_000:  # small calls: NumPy, no kernel to load
+            rel = pts[:, None, :] - xs[None, :, :]
             den = (np.einsum("nmk,nmk->nm", rel, rel) + a2) ** 1.5
-            out[s : s + chunk] = np.einsum("nmk,nm->nk", np.cross(dl[None], rel), 1.0 / den)
+            out[:] = np.einsum("nmk,nm->nk", np.cross(dl[None], rel), 1.0 / den)
+        else:  # compiled sum over the segments, parallel over points (same terms, same order)
+            _biot_savart_kernel()(pts, np.ascontiguousarray(xs), np.ascontiguousarray(dl), float(a2), out)
         return out * (self.circulation_mm2_s / (4 * math.pi))
+
+
+_BIOT_SAVART = []
+
+
+def _biot_savart_kernel():
+    """Compiled regularised Biot-Savart sum of :class:`VortexRing` (Numba, cached on disk):
+    ``out[n] = sum_m dl_m x (p_n - x_m) / (|p_n - x_m|^2 + a^2)^(3/2)``. 20x the NumPy
+    einsum/cross version on 2 cores (the demo's velocity-error reference: 21 s -> ~1 s)."""
+    if _BIOT_SAVART:
+        return _BIOT_SAVART[0]
+    from mitpiv._numba import numba
+
+    nb = numba()
+
+    @nb.njit(parallel=True, cache=True, fastmath=False)
+    def biot_savart(p, xs, dl, a2, out):
+        for n in nb.prange(p.shape[0]):
+            ux = uy = uz = 0.0
+            for m in range(xs.shape[0]):
+                rx, ry, rz = p[n, 0] - xs[m, 0], p[n, 1] - xs[m, 1], p[n, 2] - xs[m, 2]
+                inv = 1.0 / (rx * rx + ry * ry + rz * rz + a2) ** 1.5
+                ux += (dl[m, 1] * rz - dl[m, 2] * ry) * inv
+                uy += (dl[m, 2] * rx - dl[m, 0] * rz) * inv
+                uz += (dl[m, 0] * ry - dl[m, 1] * rx) * inv
+            out[n, 0], out[n, 1], out[n, 2] = ux, uy, uz
+
+    _BIOT_SAVART.append(biot_savart)
+    return biot_savart
 
 
 class ABC(Flow):

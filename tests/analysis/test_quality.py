@@ -218,3 +218,21 @@ def test_bad_input():
         VoxelGrid.from_bounds((0, 0, 0), (1, -1, 1), 0.1)
     with pytest.raises(ConfigError, match="voxel_mm"):
         VoxelGrid((0, 0, 0), (0.1, 0, 0.1), (2, 2, 2))
+
+
+@pytest.mark.parametrize("case", ["ties", "distinct", "zeros_and_ties", "constant", "negative_minimum", "one"])
+def test_average_ranks_equal_scipy_rankdata(case):
+    """The ranking behind Q' (minimum-value ties taken without sorting, the rest sorted)
+    against scipy.stats.rankdata's average method: exactly equal."""
+    from scipy.stats import rankdata
+
+    from mitpiv.analysis.quality import average_ranks
+
+    rng = np.random.default_rng(11)
+    x = {"ties": rng.integers(0, 5, 2000).astype(float), "distinct": rng.random(2000),
+         "zeros_and_ties": np.r_[np.zeros(1000), rng.integers(1, 4, 600), rng.random(400)],
+         "constant": np.full(10, 3.0), "negative_minimum": np.array([-1.0, -1.0, 2, 2, -5, 0, 0]),
+         "one": np.array([2.5])}[case]
+    rng.shuffle(x)
+    np.testing.assert_array_equal(average_ranks(x), rankdata(x))
+    np.testing.assert_array_equal(average_ranks(x.reshape(-1, 1)), rankdata(x))  # any shape, ravelled

@@ -160,6 +160,18 @@ def test_vortex_ring_circulation():
     assert ring.speed_mm_s == pytest.approx(g / (4 * np.pi * big_r) * (np.log(8 * big_r / a) - 0.25))
 
 
+def test_vortex_ring_compiled_sum_equals_numpy_sum():
+    """Large calls take the compiled Biot-Savart kernel, small ones NumPy: the same terms in
+    the same order, so equal to rounding (1e-13 of the largest speed)."""
+    ring = F.VortexRing(8.0, 2000.0, 2.0, center=(0.0, -4.0, 0.0), axis=(0, 1, 0))
+    pts = np.random.default_rng(5).uniform(-20, 20, (3000, 3))
+    assert pts.shape[0] * ring.segments >= 50_000  # the kernel path
+    big = ring(pts, 0.002)
+    small = np.concatenate([ring(pts[i : i + 50], 0.002) for i in range(0, len(pts), 50)])
+    assert 50 * ring.segments < 50_000  # the NumPy path
+    np.testing.assert_allclose(big, small, rtol=0, atol=1e-13 * np.abs(small).max())
+
+
 def test_abc_is_beltrami():
     abc = F.ABC(1.0, 0.8, 0.6, length_mm=1.0, speed_mm_s=1.0)
     np.testing.assert_allclose(curl(abc, PTS[:50] / 4), abc(PTS[:50] / 4), atol=CURL_FD_ATOL)
