@@ -195,6 +195,10 @@ def _warp_kernels():
         return _KERNELS
     from mitpiv._numba import numba
 
+    # Helpers called by other kernels are module globals, not closure cells: Numba's cache
+    # key hashes a kernel's closure cells, and a pickled dispatcher differs per process, so
+    # a kernel calling a closure helper was recompiled in every process (and its cache grew).
+    global bspline3
     nb = numba()
 
     @nb.njit(parallel=True, cache=True)

@@ -46,6 +46,10 @@ _KERNELS = {}
 def _kernels():
     if _KERNELS:
         return _KERNELS
+    # Helpers called by other kernels are module globals, not closure cells: Numba's cache
+    # key hashes a kernel's closure cells, and a pickled dispatcher differs per process, so
+    # a kernel calling a closure helper was recompiled in every process (and its cache grew).
+    global on_grid, cell, bilinear, result
     nb = numba()
 
     @nb.njit(inline="always", cache=True)

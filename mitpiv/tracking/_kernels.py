@@ -33,6 +33,10 @@ _K = {}
 def kernels() -> dict:
     if _K:
         return _K
+    # Helpers called by other kernels are module globals, not closure cells: Numba's cache
+    # key hashes a kernel's closure cells, and a pickled dispatcher differs per process, so
+    # a kernel calling a closure helper was recompiled in every process (and its cache grew).
+    global _solve
     nb = numba()
 
     @nb.njit(cache=True)
