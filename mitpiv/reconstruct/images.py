@@ -17,7 +17,8 @@ RECONSTRUCT_METHODS = TOMO_METHODS + ("plenoptic", "drt-mart")
 
 def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, whites=None, iterations: int = 5,
                        mu: float = 1.0, weights: str = "circle", interpolation: str = "linear",
-                       preprocess: float | None = None, smooth_px: float = 0.0, combine: str = "multiplicative",
+                       preprocess: float | None = None, smooth_px: float = 0.0, floor_rel: float = 0.0,
+                       combine: str = "multiplicative",
                        threshold_k: float | None = 3.0,
                        rays_per_pixel: int = 16, fuse_normalise: str = "histogram",
                        progress: Progress = None, cache=None, mappings=None) -> tuple[np.ndarray, dict]:
@@ -56,6 +57,7 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
             maps = list(mappings)
         return reconstruct_volume(images, maps, grid, method, iterations=iterations, mu=mu, weights=weights,
                                   interpolation=interpolation, preprocess=preprocess, smooth_px=smooth_px,
+                                  floor_rel=floor_rel,
                                   combine=combine,
                                   threshold_k=threshold_k, progress=progress, cache=cache)
     if method not in RECONSTRUCT_METHODS:

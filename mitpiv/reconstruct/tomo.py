@@ -108,7 +108,8 @@ def _check_choice(what, name, value, choices):
         raise ConfigError(f"{what}: '{name}' must be one of {choices}, got {value!r}.")
 
 
-def preprocess_images(images, *, k: float | None = 2.0, smooth_px: float = 0.0) -> list[np.ndarray]:
+def preprocess_images(images, *, k: float | None = 2.0, smooth_px: float = 0.0,
+                      floor_rel: float = 0.0) -> list[np.ndarray]:
     """Optional Gaussian smoothing, then histogram-based thresholding: subtract each image's
     background + ``k`` noise sigmas.
 
@@ -138,12 +139,21 @@ def preprocess_images(images, *, k: float | None = 2.0, smooth_px: float = 0.0) 
     and 1 % noise, k = 0 keeps Q within 0.03 of the unprocessed images and prunes 97 % of
     the voxels; k = 2 loses 0.3 in Q).
 
+    ``floor_rel`` > 0 finally sets every pixel below ``floor_rel`` times the image's largest
+    value to exactly zero: the dynamic range of a camera (a 12-bit sensor records nothing below
+    about 2.4e-4 of full scale). Noise-free rendered or analytic particle images have tails that
+    never reach zero, so without a floor MLOS and the zero-pixel rule prune almost nothing (83 %
+    of the voxels active at 0.05 ppp in the speed bench); a floor of 1e-3 keeps 28 % active, Q
+    0.7912 against 0.7908, 3.3x faster (bench/bench_speed.py).
+
     Parameters
     ----------
     images : sequence of (H, W) arrays
     k : float >= 0, or None (smoothing only, no threshold)
     smooth_px : float >= 0
         Gaussian sigma [px] of the smoothing before the threshold (0: none).
+    floor_rel : float in [0, 1)
+        Pixels below this fraction of the image's maximum become zero (0: none).
 
     Returns
     -------
@@ -154,6 +164,9 @@ def preprocess_images(images, *, k: float | None = 2.0, smooth_px: float = 0.0) 
     if not (np.isfinite(smooth_px) and 0 <= smooth_px <= 10):
         raise ConfigError(f"preprocess_images: 'smooth_px' must be a Gaussian sigma in [0, 10] px, got {smooth_px!r}; "
                           f"0 turns the smoothing off.")
+    if not (np.isfinite(floor_rel) and 0 <= floor_rel < 1):
+        raise ConfigError(f"preprocess_images: 'floor_rel' must be a fraction of the image maximum in [0, 1), got "
+                          f"{floor_rel!r}; 0 turns the floor off (1e-3 is about a 10-bit camera's range).")
     out = []
     for i, im in enumerate([images] if isinstance(images, np.ndarray) and images.ndim == 2 else images):
         a = np.asarray(im, dtype=np.float64)
@@ -182,6 +195,8 @@ def preprocess_images(images, *, k: float | None = 2.0, smooth_px: float = 0.0) 
             below = a[a <= mode]
             sigma = float(np.sqrt(np.mean((below - mode) ** 2))) if below.size else 0.0
         out.append(np.maximum(a - (mode + k * sigma), 0.0))
+    if floor_rel > 0:
+        out = [np.where(a >= floor_rel * a.max(), a, 0.0) for a in out]
     return out
 
 
@@ -599,7 +614,8 @@ RESIDUALS = ("each", "final")
 
 def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 1.0, smart: bool = False,
          init="mlos", weights: str = "circle", psf_sigma_px: float = 0.5, interpolation: str = "linear",
-         prune: bool = True, preprocess: float | None = None, smooth_px: float = 0.0, chunk: int = 1_000_000,
+         prune: bool = True, preprocess: float | None = None, smooth_px: float = 0.0, floor_rel: float = 0.0,
+         chunk: int = 1_000_000,
          progress: Progress = None, return_info: bool = False, cache: WeightCache | None = None,
          residuals: str = "each"):
     """MART or SMART reconstruction on sparse voxel-pixel weights.
@@ -644,6 +660,10 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
         Gaussian smoothing of the images [px] before the threshold (:func:`preprocess_images`);
         0 (default) leaves them as they are. Use it for noisy images clipped at 0, whose zero
         pixels inside particle images would otherwise zero the particles' voxels.
+    floor_rel : float in [0, 1)
+        Pixels below this fraction of each image's maximum are set to zero first
+        (:func:`preprocess_images`): the camera's dynamic range, which lets MLOS prune the
+        volume when the images' particle tails never reach zero (0, the default: no floor).
     chunk : int
         Voxels per batch when computing weight footprints on the generic path (bounds
         temporary memory).
@@ -679,8 +699,8 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
         init_vol = grid.check_volume(init, "init").astype(np.float64)
         if not np.all(np.isfinite(init_vol)) or np.any(init_vol < 0):
             raise ConfigError(f"{what}: 'init' must be finite and >= 0.")
-    if preprocess is not None or smooth_px:
-        imgs = preprocess_images(imgs, k=preprocess, smooth_px=smooth_px)
+    if preprocess is not None or smooth_px or floor_rel:
+        imgs = preprocess_images(imgs, k=preprocess, smooth_px=smooth_px, floor_rel=floor_rel)
     _check_coverage(maps, imgs, grid, what)
     _warn_dark(imgs, what)
     t0 = time.perf_counter()
@@ -803,7 +823,8 @@ TOMO_METHODS = ("mlos", "mart", "smart", "sapiv")
 def reconstruct_volume(images, mappings, grid: VoxelGrid, method: str = "mart", *, iterations: int = 5, mu: float = 1.0,
                        weights: str = "circle", interpolation: str = "linear", preprocess: float | None = None,
                        smooth_px: float = 0.0, combine: str = "multiplicative", threshold_k: float | None = 3.0,
-                       progress: Progress = None, cache: WeightCache | None = None) -> tuple[np.ndarray, dict]:
+                       progress: Progress = None, cache: WeightCache | None = None,
+                       floor_rel: float = 0.0) -> tuple[np.ndarray, dict]:
     """One entry point for the camera-image methods (``mlos``, ``mart``, ``smart``,
     ``sapiv``, the latter combining by ``combine`` with per-plane ``threshold_k``); returns
     (volume, info), info from :func:`mart` (the final residual only) or empty. ``cache``: a
@@ -815,6 +836,6 @@ def reconstruct_volume(images, mappings, grid: VoxelGrid, method: str = "mart", 
                              threshold_k=threshold_k, progress=progress), {}
     if method in ("mart", "smart"):
         return mart(images, mappings, grid, iterations=iterations, mu=mu, smart=method == "smart", weights=weights,
-                    interpolation=interpolation, preprocess=preprocess, smooth_px=smooth_px, progress=progress,
-                    return_info=True, cache=cache, residuals="final")
+                    interpolation=interpolation, preprocess=preprocess, smooth_px=smooth_px, floor_rel=floor_rel,
+                    progress=progress, return_info=True, cache=cache, residuals="final")
     raise ConfigError(f"reconstruct: method={method!r} is not one of {TOMO_METHODS}.")

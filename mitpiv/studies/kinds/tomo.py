@@ -190,6 +190,9 @@ class ReconstructionTable(Table):
     smooth_px: Annotated[float, Field(ge=0, le=10)] = Field(
         0.0, description="MART / SMART: Gaussian image smoothing [px] before the threshold; use ~0.7 for noisy "
                          "8-bit images, whose clipped zero pixels otherwise zero the particles' voxels (0: off)")
+    floor_rel: Annotated[float, Field(ge=0, lt=1)] = Field(
+        0.0, description="MART / SMART: pixels below this fraction of each image's maximum set to 0 (the camera's "
+                         "dynamic range; lets MLOS prune voxels when particle-image tails never reach 0; 0: off)")
     combine: Literal["additive", "multiplicative"] = Field("multiplicative", description="sapiv / plenoptic combination")
     threshold_k: float | None = Field(3.0, description="sapiv: keep mean + k sigma per plane (none: no threshold)")
     fuse_normalise: Literal["histogram", "max", "none"] = Field(
@@ -537,7 +540,7 @@ def stage_reconstruct(ctx: StageContext) -> dict:
             metas = [_undistorted(m) for m in metas]
         vol, inf = reconstruct_images(imgs, metas, grid, r.method, iterations=r.iterations, mu=r.mu,
                                       weights=r.weights, interpolation=r.interpolation, preprocess=r.preprocess,
-                                      smooth_px=r.smooth_px,
+                                      smooth_px=r.smooth_px, floor_rel=r.floor_rel,
                                       combine=r.combine, threshold_k=r.threshold_k,
                                       fuse_normalise=r.fuse_normalise, rays_per_pixel=r.rays_per_pixel,
                                       progress=ctx.progress, cache=cache)
