@@ -52,6 +52,7 @@ from mitpiv import analysis as an  # noqa: E402
 from mitpiv import reconstruct as rc  # noqa: E402
 
 ROWS = []
+SECTIONS = "mart,piv,ncc,shake,focal,big,scaling"
 
 
 def timed(f, *a, **k):
@@ -350,7 +351,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="smaller cases (a few minutes)")
     ap.add_argument("--scale", type=float, default=None, help="MART lateral scale (1 = 480x320x130)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks.md"))
-    ap.add_argument("--sections", default="mart,piv,ncc,shake,focal,big,scaling", help="comma-separated subset to run")
+    ap.add_argument("--sections", default=SECTIONS, help="comma-separated subset to run")
     a = ap.parse_args(argv)
     scale = a.scale or (0.3 if a.quick else 0.5)
     print("| stage | ours | baseline | baseline time | ratio | accuracy | notes |")
@@ -371,8 +372,10 @@ def main(argv=None):
     if "scaling" in sections:
         scaling(a.quick)
     text = ("# Benchmarks (issue 26)\n\nWritten by `python bench/bench_speed.py"
-            + (" --quick" if a.quick else "") + f"` (`make bench`). Machine: {machine()}.\n\n"
-            "The machine is shared with other jobs: absolute times are noisy; each ratio compares two "
+            + (" --quick" if a.quick else "") + (f" --scale {a.scale:g}" if a.scale else "")
+            + (f" --sections {a.sections}" if a.sections != SECTIONS else "")
+            + f"` (`make bench` runs `--quick`). Machine: {machine()}.\n\n"
+            "Absolute times move with the machine's load (the load average above); each ratio compares two "
             "codes timed one after the other in the same run. Baselines: the pre-issue code paths are frozen "
             "copies (bench/reference_mart.py, bench/reference_piv3d.py, bench/reference_ncc.py, bench/reference_shake.py, bench/reference_refocus.py).\n\n"
             "| stage | ours | baseline | baseline time | ratio | accuracy | notes |\n|---|---|---|---|---|---|---|\n"
