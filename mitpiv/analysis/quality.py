@@ -145,7 +145,8 @@ def average_ranks(x) -> np.ndarray:
     A volume is mostly one tied value, its minimum (the zeros outside particles): those
     voxels take the rank ``(n_min + 1) / 2`` without being sorted, and only the rest is
     sorted (their ranks start after ``n_min``). On the demo's 12.8 M-voxel truth (73 % zeros)
-    that is 4x faster than ``rankdata``; on a volume of distinct values it is one sort too."""
+    that is 2.7x faster than ``rankdata`` (0.82 s vs 2.24 s); on a volume of distinct values it is
+    one sort too (3.5 s vs 4.1 s)."""
     x = np.asarray(x, dtype=np.float64).ravel()
     n = x.size
     lo = x.min() if n else 0.0

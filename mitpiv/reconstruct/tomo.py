@@ -144,7 +144,7 @@ def preprocess_images(images, *, k: float | None = 2.0, smooth_px: float = 0.0,
     about 2.4e-4 of full scale). Noise-free rendered or analytic particle images have tails that
     never reach zero, so without a floor MLOS and the zero-pixel rule prune almost nothing (83 %
     of the voxels active at 0.05 ppp in the speed bench); a floor of 1e-3 keeps 28 % active, Q
-    0.7912 against 0.7908, 3.3x faster (bench/bench_speed.py).
+    0.7912 against 0.7908, 2.0x faster in the same run (bench/bench_speed.py).
 
     Parameters
     ----------
