@@ -195,9 +195,7 @@ def _warp_kernels():
         return _KERNELS
     from mitpiv._numba import numba
 
-    # Helpers called by other kernels are module globals, not closure cells: Numba's cache
-    # key hashes a kernel's closure cells, and a pickled dispatcher differs per process, so
-    # a kernel calling a closure helper was recompiled in every process (and its cache grew).
+    # helpers called by other kernels: module globals, not closure cells (see mitpiv._numba)
     global bspline3
     nb = numba()
 

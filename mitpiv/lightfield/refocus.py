@@ -46,9 +46,7 @@ _KERNELS = {}
 def _kernels():
     if _KERNELS:
         return _KERNELS
-    # Helpers called by other kernels are module globals, not closure cells: Numba's cache
-    # key hashes a kernel's closure cells, and a pickled dispatcher differs per process, so
-    # a kernel calling a closure helper was recompiled in every process (and its cache grew).
+    # helpers called by other kernels: module globals, not closure cells (see mitpiv._numba)
     global on_grid, cell, bilinear, result
     nb = numba()
 

@@ -42,9 +42,7 @@ def camera_row(camera) -> np.ndarray:
 def kernels() -> dict:
     if _K:
         return _K
-    # Helpers called by other kernels are module globals, not closure cells: Numba's cache
-    # key hashes a kernel's closure cells, and a pickled dispatcher differs per process, so
-    # a kernel calling a closure helper was recompiled in every process (and its cache grew).
+    # helpers called by other kernels: module globals, not closure cells (see mitpiv._numba)
     global circle_overlap, weight, inside_support, mart_row, mart_row_f32, pinhole, sample_linear
     nb = numba()
 

@@ -208,7 +208,8 @@ def _write_report(rows, figures, path) -> None:
              "| ppp | method | status | yield | ghost fraction | position error [px] | velocity error | wall [s] |",
              "|---|---|---|---|---|---|---|---|"]
     for r in sorted(rows, key=lambda r: (r.get("ppp") or 0.0, r["method"])):
-        status = r.get("status", "ok") if r.get("status", "ok") == "ok" else f"{r['status']}: {r.get('error', '')}"
+        st = r.get("status", "ok")
+        status = st if st == "ok" else f"{st}: {r.get('error', '')}"
         lines.append(f"| {_fmt(r.get('ppp'), 'g')} | {r['method']} | {status.replace('|', '/')} | "
                      f"{_fmt(r.get('yield'), '.3f')} | {_fmt(r.get('ghost_fraction'), '.4f')} | "
                      f"{_fmt(r.get('position_error_px'), '.3f')} | {_fmt(r.get('velocity_error'), '.4f')} | "

@@ -259,16 +259,14 @@ def pooled_statistics(results: list[dict], window: int) -> dict:
     vec = [r["piv"][str(int(window))]["vectors"] for r in results]
     y = np.concatenate([v["y_plus"] for v in vec])
     pts = ch.center_mm + ((y - system.center_y_plus) * system.l_nu_mm)[:, None] * ch.wall_normal
-    out = {}
+    out, framed = {}, {}
     for ref in ("meas", "avg", "dns"):
-        vel = np.concatenate([np.asarray(v[ref], dtype=float).reshape(-1, 3) for v in vec])
-        st = wall_statistics(pts, vel @ ch.frame * ch.friction_velocity_mm_s, ch)
+        framed[ref] = np.concatenate([np.asarray(v[ref], dtype=float).reshape(-1, 3) for v in vec]) @ ch.frame
+        st = wall_statistics(pts, framed[ref] * ch.friction_velocity_mm_s, ch)
         out[ref] = {k: np.asarray(st[k]).tolist() for k in ("y_plus", "n", "U", "u_rms", "v_rms", "w_rms", "uv")}
     out["err_avg"] = statistics_error_percent(out["meas"], out["avg"])
     out["err_dns"] = statistics_error_percent(out["meas"], out["dns"])
-    out["decomposition"] = error_decomposition(y, *(np.concatenate([np.asarray(v[ref], dtype=float).reshape(-1, 3)
-                                                                    for v in vec]) @ ch.frame
-                                                    for ref in ("meas", "avg", "dns")))
+    out["decomposition"] = error_decomposition(y, framed["meas"], framed["avg"], framed["dns"])
     return out
 
 
