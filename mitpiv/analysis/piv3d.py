@@ -912,6 +912,20 @@ def _fill_invalid(field):
 # ---------------------------------------------------------------------------------- errors
 
 
+def _unique_rows(key):
+    """``np.unique(key, axis=0, return_index=True, return_inverse=True)[1:]`` for an (n, 3)
+    array by one stable lexsort: (index of each distinct row's first occurrence, in
+    lexicographic row order; the row of each input row). 5x faster than ``np.unique`` with
+    an axis, which sorts a structured view (the demo's 990 k sample points: 1.0 s)."""
+    order = np.lexsort(key.T[::-1])
+    ks = key[order]
+    new = np.ones(len(ks), bool)
+    new[1:] = np.any(ks[1:] != ks[:-1], axis=1)
+    inverse = np.empty(len(ks), np.int64)
+    inverse[order] = np.cumsum(new) - 1
+    return order[new], inverse
+
+
 def velocity_error(field: VectorField, flow, *, dt_s: float | None = None, t0_s: float = 0.0, samples: int = 4,
                    substeps: int = 10, include_outliers: bool = True) -> dict:
     """Error of a PIV field against an analytic flow averaged over each interrogation volume.
@@ -948,9 +962,9 @@ def velocity_error(field: VectorField, flow, *, dt_s: float | None = None, t0_s:
     # overlapping windows share sample points (75 % overlap, 4 samples: each point serves up
     # to 64 windows): advect each distinct point once
     key = np.round(pts / (1e-6 * max(wx, wy, wz)))
-    uniq, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    first, inverse = _unique_rows(key)
     u_pts = pts[first]
-    disp = (advect(u_pts, flow, dt_s=dt, t0_s=t0_s, substeps=substeps) - u_pts)[inverse.reshape(-1)]
+    disp = (advect(u_pts, flow, dt_s=dt, t0_s=t0_s, substeps=substeps) - u_pts)[inverse]
     ref = disp.reshape(centres.shape[0], -1, 3).mean(axis=1).reshape(field.shape + (3,))
     if field.dt_s is not None:
         ref = ref / dt

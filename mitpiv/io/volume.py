@@ -12,12 +12,23 @@ from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.io.arrays import json_entry, read_npz, write_npz
 from mitpiv.io.records import to_jsonable
 
+#: Share of zero voxels from which a volume is stored compressed.
+COMPRESS_ZERO_SHARE = 0.5
+
 
 def write_volume(path, volume, meta: dict) -> Path:
-    """Write ``volume`` and ``meta`` (must hold ``grid``, a VoxelGrid dict) to ``path`` (.npz)."""
+    """Write ``volume`` and ``meta`` (must hold ``grid``, a VoxelGrid dict) to ``path`` (.npz).
+
+    A volume that is at least :data:`COMPRESS_ZERO_SHARE` zeros (a pruned MART, a
+    thresholded refocus) is deflated; a dense one is stored as it is: deflate saves 5 % of
+    the demo's 12.8 M-voxel MART volume (no voxel zero) for 1.5 s per write and 0.26 s per
+    read."""
     if "grid" not in meta:
         raise ConfigError("write_volume: meta must hold the voxel grid ('grid': VoxelGrid.to_dict()).")
-    return write_npz(path, {"volume": np.asarray(volume), "meta": json.dumps(to_jsonable(meta))}, owner="write_volume")
+    vol = np.asarray(volume)
+    sparse = vol.size == 0 or np.count_nonzero(vol) <= (1.0 - COMPRESS_ZERO_SHARE) * vol.size
+    return write_npz(path, {"volume": vol, "meta": json.dumps(to_jsonable(meta))}, compressed=bool(sparse),
+                     owner="write_volume")
 
 
 def read_volume(path):

@@ -260,7 +260,9 @@ _BIOT_SAVART = []
 def _biot_savart_kernel():
     """Compiled regularised Biot-Savart sum of :class:`VortexRing` (Numba, cached on disk):
     ``out[n] = sum_m dl_m x (p_n - x_m) / (|p_n - x_m|^2 + a^2)^(3/2)``. 16x the NumPy
-    einsum/cross version on 2 cores (20000 points: 0.057 s vs 0.91 s) (the demo's velocity-error reference: 21 s -> ~1 s)."""
+    einsum/cross version on 2 cores (20000 points: 0.057 s vs 0.91 s) (the demo's velocity-error reference: 21 s -> ~1 s);
+    the power as ``r2 * sqrt(r2)`` instead of ``r2 ** 1.5`` (a pow call): 3.8x again (25000 points, the demo's ring:
+    17.5 ms vs 66 ms per call, results equal to 3e-16 relative)."""
     if _BIOT_SAVART:
         return _BIOT_SAVART[0]
     from mitpiv._numba import numba
@@ -273,7 +275,8 @@ def _biot_savart_kernel():
             ux = uy = uz = 0.0
             for m in range(xs.shape[0]):
                 rx, ry, rz = p[n, 0] - xs[m, 0], p[n, 1] - xs[m, 1], p[n, 2] - xs[m, 2]
-                inv = 1.0 / (rx * rx + ry * ry + rz * rz + a2) ** 1.5
+                r2 = rx * rx + ry * ry + rz * rz + a2
+                inv = 1.0 / (r2 * math.sqrt(r2))  # r2^-1.5 without pow(): 2-3x faster
                 ux += (dl[m, 1] * rz - dl[m, 2] * ry) * inv
                 uy += (dl[m, 2] * rx - dl[m, 0] * rz) * inv
                 uz += (dl[m, 0] * ry - dl[m, 1] * rx) * inv

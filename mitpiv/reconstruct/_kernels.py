@@ -383,5 +383,37 @@ def kernels() -> dict:
                 p2[q] = cxx / det
                 p3[q] = area / (2.0 * math.pi * math.sqrt(det))
 
+    @nb.njit(parallel=True, cache=True)
+    def pinhole_image_rows(idx, xs, ys, zs, cam, h, crow):
+        """Image row (clamped onto 0..h-1) of the projected centre of voxels ``idx``, from
+        the projection rounded to float32 as :func:`footprints_pinhole` stores it."""
+        nyx = ys.shape[0] * xs.shape[0]
+        nx = xs.shape[0]
+        for q in nb.prange(idx.shape[0]):
+            flat = idx[q]
+            k = flat // nyx
+            rest = flat - k * nyx
+            j = rest // nx
+            i = rest - j * nx
+            _, _, _, _, vv, _, _ = pinhole(cam, xs[i], ys[j], zs[k])
+            r = math.floor(np.float64(np.float32(vv)))
+            crow[q] = 0 if not r > 0 else (h - 1 if r > h - 1 else np.int32(r))
+
+    @nb.njit(cache=True)
+    def counting_order(keys, n_keys, order, bucket):
+        """Stable counting sort of small non-negative integer keys: ``order`` as
+        ``np.argsort(keys, kind="stable")`` and ``bucket`` (n_keys + 1) the start of each key's
+        run (O(n), where NumPy sorts 32-bit keys by comparison)."""
+        bucket[:] = 0
+        for q in range(keys.shape[0]):
+            bucket[keys[q] + 1] += 1
+        for r in range(n_keys):
+            bucket[r + 1] += bucket[r]
+        pos = bucket[:-1].copy()
+        for q in range(keys.shape[0]):
+            r = keys[q]
+            order[pos[r]] = q
+            pos[r] += 1
+
     _K.update(locals())
     return _K

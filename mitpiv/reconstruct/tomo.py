@@ -27,7 +27,9 @@ next frame of the same cameras and grid (the experiment runner shares one across
 Speed (issue 26): for pinhole mappings the MLOS pass, the projections and the weight
 footprints run in compiled kernels (``_kernels.py``; hand-written because they fuse the
 camera model with the sampling and no library offers that), the CSR assembly reads
-bucket-sorted footprints, and the MART sweep evaluates its factor in single precision.
+footprints computed in image-row order (a compiled counting sort), and the MART sweep
+keeps the active voxels in float32 (the output's precision; 20 % faster than float64 on the
+demo, max difference 1.5e-7 of the maximum) and evaluates its factor in single precision.
 The pre-issue code path is kept as the benchmark baseline in bench/reference_mart.py.
 """
 
@@ -444,7 +446,6 @@ class _CameraWeights:
 
 def _build_weights(uv, fp, model, shape_hw):
     """CSR (pixel rows) of one camera, assembled in parallel over image rows."""
-    k = kernels()
     h, w = shape_hw
     v_all = np.asarray(uv[:, 1], dtype=np.float64)
     # voxels bucketed by the image row of their projected centre (clamped onto the image);
@@ -458,6 +459,31 @@ def _build_weights(uv, fp, model, shape_hw):
     u, v = (np.ascontiguousarray(uv[order, i], dtype=np.float64) for i in (0, 1))
     rad = np.ascontiguousarray(fp[0][order], dtype=np.float64)
     pars = tuple(np.ascontiguousarray(a[order], dtype=np.float64) for a in fp[1:])
+    return _assemble(u, v, rad, pars, order, bucket, model, shape_hw)
+
+
+def _build_weights_pinhole(row, ids, grid, model, psf, shape_hw):
+    """:func:`_build_weights` for a packed pinhole camera (the same matrix): the image rows
+    of the voxels first, a compiled counting sort, then the footprints computed directly in
+    bucket order (no argsort, no gather of seven footprint arrays: 1.3 s less per camera of
+    the demo's 12.8 M voxels)."""
+    k = kernels()
+    h = shape_hw[0]
+    crow = np.empty(len(ids), np.int32)
+    k["pinhole_image_rows"](ids, grid.x_mm, grid.y_mm, grid.z_mm, row, h, crow)
+    order = np.empty(len(ids), np.int64)
+    bucket = np.empty(h + 1, np.int64)
+    k["counting_order"](crow, h, order, bucket)
+    del crow
+    u, v, fp = _footprints_pinhole(row, ids[order], grid, model, psf)
+    u, v, rad, *pars = (a.astype(np.float64) for a in (u, v, *fp))
+    return _assemble(u, v, rad, pars, order, bucket, model, shape_hw)
+
+
+def _assemble(u, v, rad, pars, order, bucket, model, shape_hw):
+    """Count, then fill, the CSR entries from footprints sorted by image-row bucket."""
+    k = kernels()
+    h, w = shape_hw
     reach = int(np.ceil(rad.max())) + 1 if len(rad) else 0
     span = int((np.floor(v + rad) - np.floor(v - rad)).max()) + 1 if len(rad) else 1
     counts = np.zeros(h * w + 1, np.int64)
@@ -745,9 +771,9 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
         if uvs is not None:
             uvs = [u[alive] for u in uvs]
     if isinstance(init, str):
-        vol = e_mlos[alive].astype(np.float64) if init == "mlos" else np.ones(len(idx))
+        vol = e_mlos[alive].astype(np.float32) if init == "mlos" else np.ones(len(idx), np.float32)
     else:
-        vol = init_vol.ravel()[idx].copy()
+        vol = init_vol.ravel()[idx].astype(np.float32)
     del e_mlos
     key = _cache_key(maps, imgs, grid, model, psf) if cache is not None else None
     cams = cache.get(key, idx) if cache is not None else None
@@ -755,9 +781,11 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
     if cams is None:
         cams = []
         for c in range(len(maps)):
+            if rows is not None:
+                cams.append(_build_weights_pinhole(rows[c], idx, grid, model, psf, imgs[c].shape))
+                continue
             u, v, fp = footprints(c, slice(None))
-            if uvs is not None:
-                uvs[c] = None
+            uvs[c] = None
             cams.append(_build_weights(np.column_stack([u, v]), fp, model, imgs[c].shape))
             del u, v, fp
         if cache is not None:

@@ -265,3 +265,17 @@ def test_curl_of_a_quadratic_field_is_exact():
     np.testing.assert_allclose(curl(u, x, y, z), want, atol=1e-12)
     with pytest.raises(ConfigError, match="n_z, n_y, n_x, 3"):
         curl(u[..., :2], x, y, z)
+
+
+def test_unique_rows_is_numpys_unique_with_an_axis():
+    """velocity_error's shared sample points: the lexsort de-duplication returns what
+    np.unique(axis=0, return_index=True, return_inverse=True) does (first occurrences in
+    lexicographic order, the row of each point), negative and repeated keys included."""
+    from mitpiv.analysis.piv3d import _unique_rows
+
+    key = np.round(np.random.default_rng(5).normal(size=(3000, 3)) * 2.0)
+    first, inverse = _unique_rows(key)
+    _, f_ref, i_ref = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    assert len(first) < len(key)
+    np.testing.assert_array_equal(first, f_ref)
+    np.testing.assert_array_equal(inverse, i_ref.reshape(-1))
