@@ -184,8 +184,16 @@ def find_particles(volume, grid, *, threshold: float | None = None, threshold_re
     if n == 0:
         return nothing
     ids = np.arange(1, n + 1)
-    size = ndimage.sum_labels(peaks, labels, ids)
-    com = np.asarray(ndimage.center_of_mass(v, labels, ids), dtype=np.float64).reshape(-1, 3)  # (k, j, i)
+    # sizes and intensity-weighted centres of the maxima (plateaus) from their own voxels:
+    # ndimage.sum_labels / center_of_mass, summed in the same (raster) order, without a
+    # pass over every voxel of the volume (0.7 s per 12.8 M-voxel volume)
+    pk = np.flatnonzero(peaks)
+    lab = labels.ravel()[pk]
+    size = np.bincount(lab, minlength=n + 1)[1:].astype(np.float64)
+    wv = v.ravel()[pk]
+    norm = np.bincount(lab, weights=wv, minlength=n + 1)[1:]
+    com = np.column_stack([np.bincount(lab, weights=wv * c.astype(np.float64), minlength=n + 1)[1:] / norm
+                           for c in np.unravel_index(pk, v.shape)])  # (k, j, i)
     # seed voxel: the plateau voxel nearest its centre (exact for single-voxel maxima)
     seed = np.rint(com).astype(np.int64)
     seed = np.clip(seed, 0, np.asarray(v.shape) - 1)

@@ -145,9 +145,12 @@ def average_ranks(x) -> np.ndarray:
     A volume is mostly one tied value, its minimum (the zeros outside particles): those
     voxels take the rank ``(n_min + 1) / 2`` without being sorted, and only the rest is
     sorted (their ranks start after ``n_min``). On the demo's 12.8 M-voxel truth (73 % zeros)
-    that is 2.7x faster than ``rankdata`` (0.82 s vs 2.24 s); on a volume of distinct values it is
-    one sort too (3.5 s vs 4.1 s)."""
-    x = np.asarray(x, dtype=np.float64).ravel()
+    that is 2.7x faster than ``rankdata`` (0.82 s vs 2.24 s). A float32 volume (a
+    reconstruction) is sorted as packed 64-bit keys (:func:`_argsort_float32`): the demo's
+    MART volume, 12.8 M voxels and no zeros, ranks in 0.87 s against 1.6 s for ``argsort``
+    of its float64 values and 3.5 s for ``rankdata``."""
+    x = np.asarray(x)
+    x = (x if x.dtype == np.float32 else x.astype(np.float64)).ravel()
     n = x.size
     lo = x.min() if n else 0.0
     rest = np.flatnonzero(x != lo)
@@ -155,7 +158,7 @@ def average_ranks(x) -> np.ndarray:
     ranks = np.full(n, (n_min + 1) / 2.0)
     if rest.size:
         v = x[rest]
-        order = np.argsort(v)  # ties are averaged below: no stable sort needed
+        order = _argsort_float32(v) if v.dtype == np.float32 else np.argsort(v)  # ties averaged below
         vs = v[order]
         start = np.flatnonzero(np.concatenate(([True], vs[1:] != vs[:-1])))  # first index of each tie group
         if start.size == vs.size:  # no ties
@@ -164,6 +167,21 @@ def average_ranks(x) -> np.ndarray:
             count = np.diff(np.append(start, vs.size))
             ranks[rest[order]] = np.repeat(n_min + start + (count + 1) / 2.0, count)
     return ranks
+
+
+def _argsort_float32(v) -> np.ndarray:
+    """``np.argsort`` of finite float32 values (ties in index order) as one sort of 64-bit
+    keys, the value's order-preserving bit pattern above its index: NumPy sorts integers with
+    SIMD but argsorts by comparison, 1.2 s against 0.4 s for the demo's 12.8 M voxels. -0.0
+    is keyed as 0.0 (they are equal)."""
+    bits = (v + np.float32(0.0)).view(np.uint32).astype(np.uint64)  # + 0.0 turns -0.0 into 0.0
+    if v.size and v.min() < 0:
+        neg = bits >= np.uint64(1 << 31)
+        bits = np.where(neg, np.uint64(0xFFFFFFFF) - bits, bits | np.uint64(1 << 31))
+    bits <<= np.uint64(32)
+    bits |= np.arange(v.size, dtype=np.uint64)
+    bits.sort()
+    return (bits & np.uint64(0xFFFFFFFF)).astype(np.int64)
 
 
 def _snr(volume, axis: int) -> float:

@@ -163,3 +163,21 @@ def test_match_statistics_and_grid_restriction(tmp_path):
     assert s["n_matched"] == keep.sum() and len(s["rms_vox"]) == 3
     r.plot(tmp_path / "pdf.png")
     assert (tmp_path / "pdf.png").stat().st_size > 10_000
+
+
+def test_plateau_centres_are_ndimage_centres_of_mass():
+    """Plateau sizes and centres come from the peak voxels alone: exactly what
+    ndimage.sum_labels / center_of_mass give over the whole volume."""
+    from scipy import ndimage
+
+    q = lattice_particles(GRID, seed=7)
+    vol = truth_volume(q, GRID, sigma_voxels=1.0)
+    sat = np.minimum(vol, 0.4 * find_particles(vol, GRID).peak.min())
+    found = find_particles(sat, GRID)
+    peaks = (sat >= ndimage.maximum_filter(sat, size=3, mode="constant", cval=-np.inf)) & (sat > 0.1 * sat.max())
+    labels, n = ndimage.label(peaks, structure=np.ones((3, 3, 3), bool))
+    com = np.asarray(ndimage.center_of_mass(sat, labels, np.arange(1, n + 1)))[:, ::-1]
+    size = ndimage.sum_labels(peaks, labels, np.arange(1, n + 1))
+    assert found.saturated.sum() == (size > 1).sum() > 0
+    ref = np.asarray(GRID.origin_mm) + (com[size > 1] + 0.5) * np.asarray(GRID.voxel_mm)
+    np.testing.assert_array_equal(found.positions_mm[found.saturated], ref)

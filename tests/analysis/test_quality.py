@@ -236,3 +236,19 @@ def test_average_ranks_equal_scipy_rankdata(case):
     rng.shuffle(x)
     np.testing.assert_array_equal(average_ranks(x), rankdata(x))
     np.testing.assert_array_equal(average_ranks(x.reshape(-1, 1)), rankdata(x))  # any shape, ravelled
+    # float32 takes the packed-key sort: the same ranks as rankdata of its values
+    np.testing.assert_array_equal(average_ranks(x.astype(np.float32)), rankdata(x.astype(np.float32)))
+
+
+def test_float32_packed_argsort_orders_signs_zeros_and_extremes():
+    """_argsort_float32 sorts like np.sort across negative values, -0.0 beside 0.0 (equal,
+    so tied in rankdata), subnormals and the largest finite values."""
+    from scipy.stats import rankdata
+
+    from mitpiv.analysis.quality import _argsort_float32, average_ranks
+
+    tiny, big = np.float32(1e-45), np.float32(3e38)
+    x = np.array([0.0, -0.0, 1.0, -1.0, -0.5, 2.0, -0.0, tiny, -tiny, big, -big, 0.0], np.float32)
+    x = np.concatenate([x, np.random.default_rng(4).normal(size=500).astype(np.float32)])
+    np.testing.assert_array_equal(x[_argsort_float32(x)], np.sort(x))
+    np.testing.assert_array_equal(average_ranks(x), rankdata(x))
