@@ -43,7 +43,7 @@ def kernels() -> dict:
     if _K:
         return _K
     # helpers called by other kernels: module globals, not closure cells (see mitpiv._numba)
-    global circle_overlap, weight, inside_support, mart_row, mart_row_f32, pinhole, sample_linear
+    global circle_overlap, weight, inside_support, mart_row, mart_row_f32, pinhole, sample_linear, footprint
     nb = numba()
 
     @nb.njit(inline="always", cache=True)
@@ -328,60 +328,85 @@ def kernels() -> dict:
                 val[j * nx + i] = e
                 keep[j * nx + i] = (e > 0.0) if prune else seen
 
+    @nb.njit(inline="always", cache=True)
+    def footprint(cam, x, y, z, d0, d1, d2, model, psf2):
+        """Projection and weight-model footprint of the voxel at (x, y, z): (u, v, support
+        radius, p0, p1, p2, p3), float64 (see ``tomo._footprints``)."""
+        f = cam[12]
+        pp1, pp2 = cam[18], cam[19]
+        zc, xn, yn, uu, vv, radial, d_radial = pinhole(cam, x, y, z)
+        # Jacobian d(u, v)/d(x, y, z) = f D dn R (tomo._footprints uses PinholeCamera.jacobian)
+        a = radial + 2.0 * xn * xn * d_radial + 6.0 * pp2 * xn + 2.0 * pp1 * yn
+        e = radial + 2.0 * yn * yn * d_radial + 6.0 * pp1 * yn + 2.0 * pp2 * xn
+        b = 2.0 * xn * yn * d_radial + 2.0 * pp1 * xn + 2.0 * pp2 * yn
+        iz = 1.0 / zc
+        # dd @ dn: rows (f a, f b) and (f b, f e) times [[1/z, 0, -x/z], [0, 1/z, -y/z]]
+        m00 = f * a * iz
+        m01 = f * b * iz
+        m02 = -(f * a * xn + f * b * yn) * iz
+        m10 = f * b * iz
+        m11 = f * e * iz
+        m12 = -(f * b * xn + f * e * yn) * iz
+        j00 = (m00 * cam[0] + m01 * cam[3] + m02 * cam[6]) * d0
+        j01 = (m00 * cam[1] + m01 * cam[4] + m02 * cam[7]) * d1
+        j02 = (m00 * cam[2] + m01 * cam[5] + m02 * cam[8]) * d2
+        j10 = (m10 * cam[0] + m11 * cam[3] + m12 * cam[6]) * d0
+        j11 = (m10 * cam[1] + m11 * cam[4] + m12 * cam[7]) * d1
+        j12 = (m10 * cam[2] + m11 * cam[5] + m12 * cam[8]) * d2
+        area = (abs(j00 * j11 - j01 * j10) + abs(j01 * j12 - j02 * j11) + abs(j00 * j12 - j02 * j10))
+        if model == 0:
+            rv = math.sqrt(area / math.pi)
+            return uu, vv, rv + PIXEL_RADIUS, rv, 0.0, 0.0, 0.0
+        cxx = (j00 * j00 + j01 * j01 + j02 * j02) / 12.0 + psf2
+        cxy = (j00 * j10 + j01 * j11 + j02 * j12) / 12.0
+        cyy = (j10 * j10 + j11 * j11 + j12 * j12) / 12.0 + psf2
+        det = cxx * cyy - cxy * cxy
+        lam = 0.5 * (cxx + cyy) + math.sqrt(0.25 * (cxx - cyy) ** 2 + cxy * cxy)
+        return (uu, vv, 3.0 * math.sqrt(lam) + 0.75, cyy / det, -cxy / det, cxx / det,
+                area / (2.0 * math.pi * math.sqrt(det)))
+
     @nb.njit(parallel=True, cache=True)
     def footprints_pinhole(idx, xs, ys, zs, cam, d0, d1, d2, model, psf2, u, v, rad, p0, p1, p2, p3):
         """Projection (rounded to float32, as stored) and weight-model footprint (support
         radius and the four model parameters, see ``tomo._footprints``) of voxels ``idx``."""
         nyx = ys.shape[0] * xs.shape[0]
         nx = xs.shape[0]
-        f = cam[12]
-        pp1, pp2 = cam[18], cam[19]
         for q in nb.prange(idx.shape[0]):
             flat = idx[q]
             k = flat // nyx
             rest = flat - k * nyx
             j = rest // nx
             i = rest - j * nx
-            zc, xn, yn, uu, vv, radial, d_radial = pinhole(cam, xs[i], ys[j], zs[k])
-            u[q] = uu
-            v[q] = vv
-            # Jacobian d(u, v)/d(x, y, z) = f D dn R (tomo._footprints uses PinholeCamera.jacobian)
-            a = radial + 2.0 * xn * xn * d_radial + 6.0 * pp2 * xn + 2.0 * pp1 * yn
-            e = radial + 2.0 * yn * yn * d_radial + 6.0 * pp1 * yn + 2.0 * pp2 * xn
-            b = 2.0 * xn * yn * d_radial + 2.0 * pp1 * xn + 2.0 * pp2 * yn
-            iz = 1.0 / zc
-            # dd @ dn: rows (f a, f b) and (f b, f e) times [[1/z, 0, -x/z], [0, 1/z, -y/z]]
-            m00 = f * a * iz
-            m01 = f * b * iz
-            m02 = -(f * a * xn + f * b * yn) * iz
-            m10 = f * b * iz
-            m11 = f * e * iz
-            m12 = -(f * b * xn + f * e * yn) * iz
-            j00 = (m00 * cam[0] + m01 * cam[3] + m02 * cam[6]) * d0
-            j01 = (m00 * cam[1] + m01 * cam[4] + m02 * cam[7]) * d1
-            j02 = (m00 * cam[2] + m01 * cam[5] + m02 * cam[8]) * d2
-            j10 = (m10 * cam[0] + m11 * cam[3] + m12 * cam[6]) * d0
-            j11 = (m10 * cam[1] + m11 * cam[4] + m12 * cam[7]) * d1
-            j12 = (m10 * cam[2] + m11 * cam[5] + m12 * cam[8]) * d2
-            area = (abs(j00 * j11 - j01 * j10) + abs(j01 * j12 - j02 * j11) + abs(j00 * j12 - j02 * j10))
-            if model == 0:
-                rv = math.sqrt(area / math.pi)
-                rad[q] = rv + PIXEL_RADIUS
-                p0[q] = rv
-                p1[q] = 0.0
-                p2[q] = 0.0
-                p3[q] = 0.0
-            else:
-                cxx = (j00 * j00 + j01 * j01 + j02 * j02) / 12.0 + psf2
-                cxy = (j00 * j10 + j01 * j11 + j02 * j12) / 12.0
-                cyy = (j10 * j10 + j11 * j11 + j12 * j12) / 12.0 + psf2
-                det = cxx * cyy - cxy * cxy
-                lam = 0.5 * (cxx + cyy) + math.sqrt(0.25 * (cxx - cyy) ** 2 + cxy * cxy)
-                rad[q] = 3.0 * math.sqrt(lam) + 0.75
-                p0[q] = cyy / det
-                p1[q] = -cxy / det
-                p2[q] = cxx / det
-                p3[q] = area / (2.0 * math.pi * math.sqrt(det))
+            u[q], v[q], rad[q], p0[q], p1[q], p2[q], p3[q] = footprint(cam, xs[i], ys[j], zs[k], d0, d1, d2, model, psf2)
+
+    @nb.njit(parallel=True, cache=True)
+    def survives_pinhole(idx, xs, ys, zs, cam, d0, d1, d2, model, psf2, img, zero_dist, alive):
+        """:func:`survives` with the footprints computed in place (rounded to float32 and
+        evaluated in the same precision as :func:`survives` on the float32 arrays of
+        :func:`footprints_pinhole`): no footprint arrays are written and read back.
+        ``zero_dist``: per pixel, the chessboard distance to the nearest zero pixel; a voxel
+        whose projected centre lies farther than its support reaches is not checked pixel
+        by pixel (it cannot touch a zero pixel)."""
+        h, w = img.shape
+        nyx = ys.shape[0] * xs.shape[0]
+        nx = xs.shape[0]
+        for a in nb.prange(idx.shape[0]):
+            if not alive[a]:
+                continue
+            flat = idx[a]
+            k = flat // nyx
+            rest = flat - k * nyx
+            j = rest // nx
+            i = rest - j * nx
+            uu, vv, rr, q0, q1, q2, q3 = footprint(cam, xs[i], ys[j], zs[k], d0, d1, d2, model, psf2)
+            ua, va, r = np.float32(uu), np.float32(vv), np.float32(rr)
+            if ua >= 0.0 and va >= 0.0 and ua < w and va < h and zero_dist[int(va), int(ua)] > r + 2.0:
+                continue
+            f0, f1, f2, f3 = np.float32(q0), np.float32(q1), np.float32(q2), np.float32(q3)
+            for row in range(max(int(math.floor(va - r)), 0), min(int(math.floor(va + r)) + 1, h)):
+                for col in range(max(int(math.floor(ua - r)), 0), min(int(math.floor(ua + r)) + 1, w)):
+                    if img[row, col] <= 0.0 and weight(model, col + 0.5 - ua, row + 0.5 - va, f0, f1, f2, f3) > 0.0:
+                        alive[a] = False
 
     @nb.njit(parallel=True, cache=True)
     def pinhole_image_rows(idx, xs, ys, zs, cam, h, crow):

@@ -759,6 +759,11 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
         for c in range(len(maps)):
             if not np.any(imgs[c] <= 0):
                 continue
+            if rows is not None:  # footprints computed inside the check
+                zero_dist = ndimage.distance_transform_cdt(imgs[c] > 0, metric="chessboard").astype(np.int32)
+                k["survives_pinhole"](idx, grid.x_mm, grid.y_mm, grid.z_mm, rows[c], *(float(d) for d in grid.voxel_mm),
+                                      mcode, float(psf) ** 2, imgs[c], zero_dist, alive)
+                continue
             for s in range(0, len(idx), chunk):
                 sl = slice(s, s + chunk)
                 u, v, fp = footprints(c, sl, np.float64)

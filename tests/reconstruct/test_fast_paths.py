@@ -87,6 +87,29 @@ def test_pinhole_weight_assembly_is_the_sorted_one(model):
             np.testing.assert_array_equal(getattr(new, name), getattr(old, name))
 
 
+@pytest.mark.parametrize("model", ["circle", "gaussian"])
+def test_fused_zero_pixel_pruning_is_the_array_one(model):
+    """survives_pinhole (footprints computed in place, voxels far from every zero pixel
+    skipped by the distance map) prunes exactly the voxels that survives prunes on the
+    stored float32 footprints."""
+    from scipy import ndimage
+
+    cams = _cameras(40)
+    rows = _pinhole_rows([PinholeMapping(c) for c in cams])
+    ids = np.arange(GRID.n_voxels, dtype=np.int64)
+    k = kernels()
+    mcode = 0 if model == "circle" else 1
+    for row, img in zip(rows, _images(cams), strict=True):
+        fused = np.ones(ids.size, np.bool_)
+        dist = ndimage.distance_transform_cdt(img > 0, metric="chessboard").astype(np.int32)
+        k["survives_pinhole"](ids, GRID.x_mm, GRID.y_mm, GRID.z_mm, row, *GRID.voxel_mm, mcode, 0.25, img, dist, fused)
+        u, v, fp = _footprints_pinhole(row, ids, GRID, model, 0.5)
+        ref = np.ones(ids.size, np.bool_)
+        k["survives"](u, v, *fp, mcode, img, ref)
+        assert 0 < fused.sum() < ids.size
+        np.testing.assert_array_equal(fused, ref)
+
+
 def test_counting_order_is_the_stable_argsort():
     keys = np.random.default_rng(2).integers(0, 37, 5000).astype(np.int32)
     order, bucket = np.empty(keys.size, np.int64), np.empty(38, np.int64)
