@@ -132,9 +132,10 @@ def rank_correlation(rec, truth, *, centred: bool = False) -> float:
 
 def rank_correlations(rec, truth) -> tuple[float, float]:
     """``(Q' of eq. 4.2, Spearman's coefficient)`` of :func:`rank_correlation` from one
-    ranking of each volume (ranking is the cost: a sort of every voxel)."""
+    ranking of each volume (ranking is the cost: a sort of every voxel). A float32 volume
+    is ranked in float32 (the same order and ties as its float64 values, a faster sort)."""
     a, b = _pair(rec, truth, "rank_correlation")
-    ra, rb = average_ranks(a), average_ranks(b)
+    ra, rb = (average_ranks(x if np.asarray(x).dtype == np.float32 else y) for x, y in ((rec, a), (truth, b)))
     return _correlation(ra, rb), _correlation(ra - ra.mean(), rb - rb.mean())
 
 
@@ -172,7 +173,7 @@ def average_ranks(x) -> np.ndarray:
 def _argsort_float32(v) -> np.ndarray:
     """``np.argsort`` of finite float32 values (ties in index order) as one sort of 64-bit
     keys, the value's order-preserving bit pattern above its index: NumPy sorts integers with
-    SIMD but argsorts by comparison, 1.2 s against 0.4 s for the demo's 12.8 M voxels. -0.0
+    SIMD but argsorts by comparison, 0.3 s against 1.2 s for the demo's 12.8 M voxels. -0.0
     is keyed as 0.0 (they are equal)."""
     bits = (v + np.float32(0.0)).view(np.uint32).astype(np.uint64)  # + 0.0 turns -0.0 into 0.0
     if v.size and v.min() < 0:

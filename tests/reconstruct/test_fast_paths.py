@@ -151,3 +151,28 @@ def test_final_residual_is_the_last_of_each():
     _, each = mart(imgs, cams, GRID, iterations=3, return_info=True)
     _, final = mart(imgs, cams, GRID, iterations=3, return_info=True, residuals="final")
     assert len(each["residuals"]) == 3 and final["residuals"] == [each["residuals"][-1]]
+
+
+def test_circle_overlap_against_independent_forms():
+    """The circle weight model's lens area against forms derived separately: containment
+    (pi r^2 of the smaller circle), disjoint circles (0), the equal-radii lens
+    2 r^2 acos(d / 2r) - (d / 2) sqrt(4 r^2 - d^2), and a 4000^2-point grid integration of
+    an unequal pair (tolerance: the grid's cell area times its perimeter count, 2e-4)."""
+    import math
+
+    kernels()
+    from mitpiv.reconstruct import _kernels as K
+
+    ov = K.circle_overlap.py_func
+    assert ov(0.1, 0.8, 0.3) == pytest.approx(math.pi * 0.09, rel=1e-14)
+    assert ov(1.2, 0.5, 0.6) == 0.0
+    for r, d in ((0.564, 0.3), (1.0, 1.5), (0.7, 0.01)):
+        lens = 2 * r * r * math.acos(d / (2 * r)) - 0.5 * d * math.sqrt(4 * r * r - d * d)
+        assert ov(d, r, r) == pytest.approx(lens, rel=1e-12)
+    r1, r2, d = 0.8, 1.0 / math.sqrt(math.pi), 0.9
+    n = 4000
+    x = (np.arange(n) + 0.5) / n * 3.0 - 1.0
+    xx, yy = np.meshgrid(x, (np.arange(n // 2) + 0.5) / n * 3.0)  # the upper half plane, y in [0, 1.5)
+    inside = (xx**2 + yy**2 < r1 * r1) & ((xx - d) ** 2 + yy**2 < r2 * r2)
+    area = 2 * inside.sum() * (3.0 / n) ** 2
+    assert ov(d, r1, r2) == pytest.approx(area, abs=2e-4)
