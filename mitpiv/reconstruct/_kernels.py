@@ -377,7 +377,10 @@ def kernels() -> dict:
             rest = flat - k * nyx
             j = rest // nx
             i = rest - j * nx
-            u[q], v[q], rad[q], p0[q], p1[q], p2[q], p3[q] = footprint(cam, xs[i], ys[j], zs[k], d0, d1, d2, model, psf2)
+            uu, vv, rr, q0, q1, q2, q3 = footprint(cam, xs[i], ys[j], zs[k], d0, d1, d2, model, psf2)
+            # rounded to float32 also when the outputs are float64 (the assembly reads them so)
+            u[q], v[q], rad[q] = np.float32(uu), np.float32(vv), np.float32(rr)
+            p0[q], p1[q], p2[q], p3[q] = np.float32(q0), np.float32(q1), np.float32(q2), np.float32(q3)
 
     @nb.njit(parallel=True, cache=True)
     def survives_pinhole(idx, xs, ys, zs, cam, d0, d1, d2, model, psf2, img, zero_dist, alive):
@@ -423,6 +426,21 @@ def kernels() -> dict:
             _, _, _, _, vv, _, _ = pinhole(cam, xs[i], ys[j], zs[k])
             r = math.floor(np.float64(np.float32(vv)))
             crow[q] = 0 if not r > 0 else (h - 1 if r > h - 1 else np.int32(r))
+
+    @nb.njit(cache=True)
+    def support_extent(v, rad):
+        """(largest support radius, largest number of image rows a support spans):
+        ``rad.max()`` and ``(floor(v + rad) - floor(v - rad)).max() + 1`` without temporaries."""
+        rmax = 0.0
+        span = 1
+        for q in range(v.shape[0]):
+            r = rad[q]
+            if r > rmax:
+                rmax = r
+            s = int(math.floor(v[q] + r) - math.floor(v[q] - r)) + 1
+            if s > span:
+                span = s
+        return rmax, span
 
     @nb.njit(cache=True)
     def counting_order(keys, n_keys, order, bucket):

@@ -475,17 +475,16 @@ def _build_weights_pinhole(row, ids, grid, model, psf, shape_hw):
     bucket = np.empty(h + 1, np.int64)
     k["counting_order"](crow, h, order, bucket)
     del crow
-    u, v, fp = _footprints_pinhole(row, ids[order], grid, model, psf)
-    u, v, rad, *pars = (a.astype(np.float64) for a in (u, v, *fp))
-    return _assemble(u, v, rad, pars, order, bucket, model, shape_hw)
+    u, v, fp = _footprints_pinhole(row, ids[order], grid, model, psf, dtype=np.float64)  # float32-rounded values
+    return _assemble(u, v, fp[0], fp[1:], order, bucket, model, shape_hw)
 
 
 def _assemble(u, v, rad, pars, order, bucket, model, shape_hw):
     """Count, then fill, the CSR entries from footprints sorted by image-row bucket."""
     k = kernels()
     h, w = shape_hw
-    reach = int(np.ceil(rad.max())) + 1 if len(rad) else 0
-    span = int((np.floor(v + rad) - np.floor(v - rad)).max()) + 1 if len(rad) else 1
+    rmax, span = k["support_extent"](v, rad) if len(rad) else (0.0, 1)
+    reach = int(math.ceil(rmax)) + 1 if len(rad) else 0
     counts = np.zeros(h * w + 1, np.int64)
     args = (u, v, rad, *pars, CIRCLE if model == "circle" else GAUSSIAN, h, w, order, bucket, reach)
     k["row_pass_sorted"](*args, counts, counts, np.zeros(0, np.int32), np.zeros(0, np.float32), False)
@@ -588,10 +587,11 @@ def _candidates_pinhole(imgs, rows, grid, prune, progress, what):
     return np.concatenate(idx), np.concatenate(init)
 
 
-def _footprints_pinhole(row, ids, grid, model, psf):
+def _footprints_pinhole(row, ids, grid, model, psf, dtype=np.float32):
     """Projections (float32, as the generic path stores them) and footprints (float32) of
-    voxels ``ids`` for one packed camera: (u, v, [radius, p0, p1, p2, p3])."""
-    out = [np.empty(len(ids), np.float32) for _ in range(7)]
+    voxels ``ids`` for one packed camera: (u, v, [radius, p0, p1, p2, p3]); ``dtype``
+    float64 holds the same float32-rounded values in float64 arrays."""
+    out = [np.empty(len(ids), dtype) for _ in range(7)]
     kernels()["footprints_pinhole"](np.ascontiguousarray(ids, np.int64), grid.x_mm, grid.y_mm, grid.z_mm, row,
                                     *(float(d) for d in grid.voxel_mm), CIRCLE if model == "circle" else GAUSSIAN,
                                     float(psf) ** 2, *out)
