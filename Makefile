@@ -24,6 +24,7 @@ lint: setup
 
 bench: setup
 	$(PY) bench/bench_speed.py --quick
+	$(PY) bench/bench_demo.py
 	$(PY) bench/bench_cameras.py
 	$(PY) bench/bench_mie.py
 	$(PY) bench/bench_optics.py

@@ -33,6 +33,7 @@ import datetime
 import math
 import os
 import platform
+import re
 import resource
 import subprocess
 import sys
@@ -45,6 +46,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
+import docblocks  # noqa: E402
 from bench_reconstruct import setup  # noqa: E402
 from reference_mart import mart_reference  # noqa: E402
 
@@ -52,6 +54,7 @@ from mitpiv import analysis as an  # noqa: E402
 from mitpiv import reconstruct as rc  # noqa: E402
 
 ROWS = []
+SCALING = []
 SECTIONS = "mart,piv,ncc,shake,focal,big,scaling"
 
 
@@ -62,9 +65,13 @@ def timed(f, *a, **k):
     return r, time.perf_counter() - t, time.process_time() - c
 
 
+def seconds(t):
+    return f"{t:.2f} s" if t >= 0.1 else f"{t * 1e3:.2f} ms"
+
+
 def emit(stage, ours, base_name, base, accuracy, note=""):
     ratio = base / ours if ours > 0 else float("nan")
-    line = f"| {stage} | {ours:.2f} s | {base_name} | {base:.2f} s | {ratio:.1f}x | {accuracy} | {note} |"
+    line = f"| {stage} | {seconds(ours)} | {base_name} | {seconds(base)} | {ratio:.1f}x | {accuracy} | {note} |"
     print(line, flush=True)
     ROWS.append(line)
 
@@ -131,7 +138,7 @@ def mart_rows(scale, iterations):
     (v0, info0), t0, c0 = timed(mart_reference, imgs, cams, grid, iterations=iterations, return_info=True)
     q1, q0 = an.quality_q(v1, truth), an.quality_q(v0, truth)
     diff = float(np.max(np.abs(v1.astype(np.float64) - v0)) / max(float(v0.max()), 1e-30))
-    emit(label, t1, "pre-issue code path", t0, f"Q {q1:.4f} vs {q0:.4f}; max |diff| {diff:.1e} of max",
+    emit(label, t1, "pre-issue code path", t0, f"Q {q1:.4f} vs {q0:.4f}; max abs diff {diff:.1e} of max",
          f"CPU {c1:.0f} s vs {c0:.0f} s; setup {info['setup_s']:.1f} s vs {info0['setup_s']:.1f} s; "
          f"{info['active_voxels'] / 1e6:.2f} M active voxels, weights {info['weight_bytes'] / 2**20:.0f} MiB, "
          f"MART memory {info['memory_bytes'] / 2**20:.0f} MiB = {info['memory_bytes'] / grid.n_voxels:.1f} B per grid "
@@ -147,7 +154,7 @@ def mart_rows(scale, iterations):
     (v2, setup_s, iter_s), t2, c2 = timed(scipy_mart, cams, imgs, grid, iterations)
     diff2 = float(np.max(np.abs(v1.astype(np.float64) - v2)) / max(float(v2.max()), 1e-30))
     emit(label, t1, "scipy.sparse MART, same weights", t2, f"Q {q1:.4f} vs {an.quality_q(v2, truth):.4f}; "
-         f"max |diff| {diff2:.1e} of max", f"its iterations {iter_s:.1f} s vs ours {info['iterate_s']:.1f} s")
+         f"max abs diff {diff2:.1e} of max", f"its iterations {iter_s:.1f} s vs ours {info['iterate_s']:.1f} s")
 
 
 # ------------------------------------------------------------------------------ PIV
@@ -166,11 +173,11 @@ def piv_rows(shape):
     d = float(np.max(np.abs(f1.displacement_vox() - f0.displacement_vox())))
     label = f"3D PIV 64-48-32, {shape[2]}x{shape[1]}x{shape[0]} voxels, {f1.n_vectors} vectors"
     emit(label, t1, "pre-issue piv3d", t0, f"RMS {', '.join(f'{x:.4f}' for x in e1)} vs "
-         f"{', '.join(f'{x:.4f}' for x in e0)} vox; max |diff| {d:.1e} vox", f"CPU {c1:.0f} s vs {c0:.0f} s")
+         f"{', '.join(f'{x:.4f}' for x in e0)} vox; max abs diff {d:.1e} vox", f"CPU {c1:.0f} s vs {c0:.0f} s")
     try:
         t_op, n_op, rms_op = openpiv_row(grid, a, b, flow, dt, window=32, overlap=24)
         emit(label, t1, f"OpenPIV 3D single pass 32^3 ({n_op} vectors)", t_op,
-             f"RMS |err| ours {math.sqrt(sum(x * x for x in e1)):.4f} vs OpenPIV {rms_op:.4f} vox",
+             f"RMS error magnitude ours {math.sqrt(sum(x * x for x in e1)):.4f} vs OpenPIV {rms_op:.4f} vox",
              f"per vector: ours {1e6 * t1 / f1.n_vectors:.0f} us, OpenPIV {1e6 * t_op / max(n_op, 1):.0f} us")
     except ImportError as exc:
         print(f"OpenPIV not available: {exc}")
@@ -190,7 +197,7 @@ def ncc_rows(quick):
         g1, t1, c1 = timed(ncc, a, b)
         g0, t0, c0 = timed(ncc_reference, a, b)
         emit(f"NCC {n} windows {w}^3, margin {m}", t1, "float64 FFT + summed-volume tables", t0,
-             f"max |gamma diff| {float(np.max(np.abs(g1 - g0))):.1e}",
+             f"max gamma diff {float(np.max(np.abs(g1 - g0))):.1e}",
              f"per vector {1e3 * t1 / n:.1f} ms vs {1e3 * t0 / n:.1f} ms")
 
 
@@ -263,7 +270,7 @@ def focal_rows(n_px, planes):
     err = max(np.abs(st[k][inner] - base[k][inner]).max() / np.abs(base[k][inner]).max() for k in range(3))
     per, per0, perb = t1 / planes, t0 / planes, tb / 3
     label = f"focal stack {n_px}x{n_px} raw px (PMR 14 hex, {lf.shape}), per plane"
-    emit(label, per, "shift-and-add, scipy.ndimage.shift per view", perb, f"max |diff| {err:.1e} relative (inner)",
+    emit(label, per, "shift-and-add, scipy.ndimage.shift per view", perb, f"max abs diff {err:.1e} relative (inner)",
          f"pre-issue kernel {per0 * 1e3:.1f} ms/plane ({per0 / per:.1f}x ours)")
     d0 = float(np.max(np.abs(st - st0)) / np.abs(st0).max())
     return per, per0, d0
@@ -305,9 +312,9 @@ def scaling(quick):
         line = (f"MART 10 it: {grid.n_voxels / 1e6:.2f} M voxels, {info['active_voxels'] / 1e6:.2f} M active: {t:.1f} s, "
                 f"memory {info['memory_bytes'] / grid.n_voxels:.1f} B/voxel")
         print(line, flush=True)
-        ROWS.append(f"| scaling | {line} | | | | | |")
+        SCALING.append(line)
     p = np.polyfit(np.log(sizes), np.log(times), 1)[0]
-    ROWS.append(f"| scaling | MART time ~ voxels^{p:.2f} | | | | | |")
+    SCALING.append(f"MART time ~ voxels^{p:.2f}")
     print(f"MART time ~ voxels^{p:.2f}")
     from bench_analysis import volumes
 
@@ -322,9 +329,9 @@ def scaling(quick):
         times.append(t)
         line = f"PIV: {f.n_vectors} vectors ({'x'.join(map(str, shape[::-1]))}): {t:.1f} s"
         print(line, flush=True)
-        ROWS.append(f"| scaling | {line} | | | | | |")
+        SCALING.append(line)
     p = np.polyfit(np.log(sizes), np.log(times), 1)[0]
-    ROWS.append(f"| scaling | PIV time ~ vectors^{p:.2f} | | | | | |")
+    SCALING.append(f"PIV time ~ vectors^{p:.2f}")
     print(f"PIV time ~ vectors^{p:.2f}")
 
 
@@ -357,6 +364,9 @@ def main(argv=None):
     print("| stage | ours | baseline | baseline time | ratio | accuracy | notes |")
     print("|---|---|---|---|---|---|---|")
     sections = set(a.sections.split(","))
+    unknown = sections - set(SECTIONS.split(","))
+    if unknown:
+        ap.error(f"--sections {a.sections}: unknown {', '.join(sorted(unknown))}; choose from {SECTIONS}")
     if "mart" in sections:
         mart_rows(scale, 10 if a.quick else 40)
     if "piv" in sections:
@@ -371,18 +381,51 @@ def main(argv=None):
         big_stack_row(1600 if a.quick else 3300, 16 if a.quick else 32)
     if "scaling" in sections:
         scaling(a.quick)
-    text = ("# Benchmarks (issue 26)\n\nWritten by `python bench/bench_speed.py"
-            + (" --quick" if a.quick else "") + (f" --scale {a.scale:g}" if a.scale else "")
-            + (f" --sections {a.sections}" if a.sections != SECTIONS else "")
-            + f"` (`make bench` runs `--quick`). Machine: {machine()}.\n\n"
-            "Absolute times move with the machine's load (the load average above); each ratio compares two "
-            "codes timed one after the other in the same run. Baselines: the pre-issue code paths are frozen "
-            "copies (bench/reference_mart.py, bench/reference_piv3d.py, bench/reference_ncc.py, bench/reference_shake.py, bench/reference_refocus.py).\n\n"
+    if sections != set(SECTIONS.split(",")):
+        print(f"\nnot written: --sections {a.sections} is a subset; a run of every section regenerates {a.out}")
+        return
+    name = "speed-quick" if a.quick else ("speed-full" if scale == 1 else f"speed-scale-{scale:g}")
+    cmd = ("python bench/bench_speed.py" + (" --quick" if a.quick else "") + (f" --scale {a.scale:g}" if a.scale else ""))
+    body = (f"`{cmd}`" + (" (`make bench`)" if a.quick else "") + f". Machine: {machine()}.\n\n"
             "| stage | ours | baseline | baseline time | ratio | accuracy | notes |\n|---|---|---|---|---|---|---|\n"
-            + "\n".join(ROWS) + "\n")
-    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.out).write_text(text)
-    print(f"\nwritten: {a.out}")
+            + "\n".join(ROWS) + "\n\nScaling (MART 10 iterations; PIV " + ("32-24-16" if a.quick else "64-48-32")
+            + ", 75 % overlap):\n\n" + "\n".join(f"- {x}" for x in SCALING) + "\n")
+    docblocks.update_file(a.out, name, body, heading=f"bench_speed.py{' --quick' if a.quick else ''}"
+                          + (f" --scale {a.scale:g}" if a.scale else ""))
+    print(f"\nwritten: block {name} of {a.out}")
+    write_readme_table(Path(a.out))
+
+
+def readme_rows(doc_text):
+    """The README's performance table, regenerated from docs/benchmarks.md: the rows of the
+    published-size run (block speed-full) where there is one, else of the quick run, and the
+    demo's end-to-end row (block demo)."""
+    name = "speed-full" if docblocks.read_block(doc_text, "speed-full") else "speed-quick"
+    block = docblocks.read_block(doc_text, name)
+    if block is None:
+        raise ValueError("docs/benchmarks.md has no speed-full or speed-quick block: run bench/bench_speed.py first")
+    prov = re.search(r"commit (\w+), (\d{4}-\d\d-\d\d)", block)
+    out = ["| stage | ours | baseline | ratio | accuracy |", "|---|---|---|---|---|"]
+    demo = docblocks.read_block(doc_text, "demo")
+    for cells in docblocks.table_rows(demo):
+        if cells[0].startswith("**end to end"):
+            stage, base, ours, ratio, acc = cells[:5]
+            out.append(f"| {stage.strip('*')} | {ours} | code of {base} | {ratio} | {acc} |")
+    for cells in docblocks.table_rows(block):
+        stage, ours, base, base_t, ratio, acc = cells[:6]
+        out.append(f"| {stage} | {ours} | {base} {base_t} | {ratio} | {acc} |")
+    src = f"block `{name}`" + (f", commit {prov.group(1)}, {prov.group(2)}" if prov else "")
+    return "\n".join(out) + f"\n\nRegenerated from [docs/benchmarks.md](docs/benchmarks.md) ({src}).\n"
+
+
+def write_readme_table(doc_path, readme=ROOT / "README.md"):
+    try:
+        body = readme_rows(Path(doc_path).read_text())
+    except ValueError as e:
+        print(f"README table not regenerated: {e}")
+        return
+    docblocks.update_file(readme, "speed-table", body)
+    print(f"written: block speed-table of {readme}")
 
 
 if __name__ == "__main__":
