@@ -55,7 +55,7 @@ from mitpiv import reconstruct as rc  # noqa: E402
 
 ROWS = []
 SCALING = []
-SECTIONS = "mart,piv,ncc,shake,focal,big,scaling"
+SECTIONS = "mart,drjit,piv,ncc,shake,focal,big,scaling"
 
 
 def timed(f, *a, **k):
@@ -155,6 +155,52 @@ def mart_rows(scale, iterations):
     diff2 = float(np.max(np.abs(v1.astype(np.float64) - v2)) / max(float(v2.max()), 1e-30))
     emit(label, t1, "scipy.sparse MART, same weights", t2, f"Q {q1:.4f} vs {an.quality_q(v2, truth):.4f}; "
          f"max abs diff {diff2:.1e} of max", f"its iterations {iter_s:.1f} s vs ours {info['iterate_s']:.1f} s")
+
+
+# ------------------------------------------------------------------------------ Dr.Jit
+def drjit_rows(scale):
+    """The MLOS pass of the pinhole fast path: the Dr.Jit kernel (LLVM backend, float64,
+    what the library runs) against the Numba kernel per plane (the fallback) on the MART
+    case's images and grid, and the float32 Dr.Jit variant that was not kept."""
+    import drjit as dr
+    from drjit_mlos import mlos_drjit
+
+    from mitpiv.reconstruct import _drjit, tomo
+
+    if not _drjit.available():
+        print("drjit: Dr.Jit's LLVM backend is not available; rows skipped")
+        return
+    cams, pts, imgs, grid = mart_case(scale)
+    imgs, maps = tomo._check_images(imgs, cams, grid, "mlos")
+    rows = tomo._pinhole_rows(maps)
+    small = mart_case(0.1)
+    si, sm = tomo._check_images(small[2], small[0], small[3], "mlos")
+    for eng in ("drjit", "numba"):  # compile / load both kernels outside the timings
+        tomo._candidates_pinhole(si, tomo._pinhole_rows(sm), small[3], True, False, "b", engine=eng)
+    mlos_drjit(si, tomo._pinhole_rows(sm), small[3])
+
+    def best(f):
+        ts = []
+        for _ in range(3):
+            r, t, _ = timed(f)
+            ts.append(t)
+        return r, min(ts)
+
+    (i1, v1), t1 = best(lambda: tomo._candidates_pinhole(imgs, rows, grid, True, False, "b", engine="drjit"))
+    (i0, v0), t0 = best(lambda: tomo._candidates_pinhole(imgs, rows, grid, True, False, "b", engine="numba"))
+    same = np.array_equal(i1, i0)
+    d = float(np.max(np.abs(v1 - v0)) / v0.max()) if same else float("nan")
+    label = f"MLOS pass {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]}, 4 cameras"
+    backend = f"Dr.Jit {dr.__version__} LLVM backend (CPU, {os.cpu_count()} threads), float64"
+    emit(label, t1, "Numba kernel per plane (float64)", t0,
+         f"same {len(i1)} candidates: {same}; max abs diff {d:.1e} of max", f"ours: {backend}; best of 3")
+    full = np.zeros(grid.n_voxels)
+    full[i1] = v1
+    v32, t32 = best(lambda: mlos_drjit(imgs, rows, grid))
+    flips = int(np.count_nonzero((v32 > 0) != (full > 0)))
+    emit(label + ", Dr.Jit float32 (not kept)", t32, "ours (Dr.Jit float64)", t1,
+         f"max abs diff {float(np.max(np.abs(v32 - full)) / full.max()):.1e} of max; {flips} voxels change candidate status",
+         "best of 3")
 
 
 # ------------------------------------------------------------------------------ PIV
@@ -369,6 +415,8 @@ def main(argv=None):
         ap.error(f"--sections {a.sections}: unknown {', '.join(sorted(unknown))}; choose from {SECTIONS}")
     if "mart" in sections:
         mart_rows(scale, 10 if a.quick else 40)
+    if "drjit" in sections:
+        drjit_rows(scale)
     if "piv" in sections:
         piv_rows((64, 160, 160) if a.quick else (80, 256, 256))
     if "ncc" in sections:

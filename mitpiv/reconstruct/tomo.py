@@ -336,6 +336,8 @@ def mlos(images, mappings, grid: VoxelGrid, *, interpolation: str = "linear", ex
     ``E(x) = (prod_c I_c(P_c(x)))^exponent`` with ``I_c`` interpolated at the projection
     ``P_c(x)`` of the voxel centre; zero where any camera sees no light or does not see the
     voxel. Computed in log space per plane (no underflow for many cameras or tiny values).
+    Pinhole cameras with bilinear interpolation take one Dr.Jit kernel per block of planes
+    (:mod:`mitpiv.reconstruct._drjit`, the same values about 6x faster than per plane).
 
     Parameters
     ----------
@@ -359,6 +361,20 @@ def mlos(images, mappings, grid: VoxelGrid, *, interpolation: str = "linear", ex
     e = _exponent(exponent, len(imgs), "mlos")
     _check_coverage(maps, imgs, grid, "mlos")
     _warn_dark(imgs, "mlos")
+    from mitpiv.reconstruct import _drjit
+
+    rows = _pinhole_rows(maps) if interpolation == "linear" else None
+    if rows is not None and _drjit.available():
+        # pinhole cameras, bilinear: one Dr.Jit kernel per block of planes (same values, ~6x faster)
+        flat = np.concatenate([np.asarray(im, np.float64).ravel() for im in imgs])
+        nyx = grid.shape[1] * grid.shape[2]
+        step = max(1, _drjit.BLOCK_VOXELS // nyx)
+        out = np.empty(grid.shape, np.float32)
+        for k0 in track(range(0, grid.shape[0], step), desc="mlos: plane blocks", progress=progress, unit="block"):
+            val, _ = _drjit.mlos_block(flat, [im.shape for im in imgs], rows, grid.x_mm, grid.y_mm,
+                                       grid.z_mm[k0:k0 + step], e)
+            out[k0:k0 + step] = val.reshape(-1, *grid.shape[1:])
+        return out
     return _volume_by_planes(imgs, maps, grid, interpolation, "multiplicative", e, progress=progress, what="mlos")
 
 
@@ -565,20 +581,37 @@ def _candidates(imgs, maps, grid, interpolation, prune, progress, what):
     return np.concatenate(idx), np.concatenate(init), [np.concatenate(u) for u in uvs]
 
 
-def _candidates_pinhole(imgs, rows, grid, prune, progress, what):
-    """:func:`_candidates` (linear interpolation) in one compiled pass per plane: flat
-    indices and MLOS values of the candidate voxels (their projections are recomputed with
-    the footprints, cheaper than storing them)."""
+def _candidates_pinhole(imgs, rows, grid, prune, progress, what, engine=None):
+    """:func:`_candidates` (linear interpolation) in compiled passes: flat indices and MLOS
+    values of the candidate voxels (their projections are recomputed with the footprints,
+    cheaper than storing them). ``engine``: "drjit" (one Dr.Jit kernel per block of planes,
+    :mod:`mitpiv.reconstruct._drjit`; the default when Dr.Jit's LLVM backend is there) or
+    "numba" (one compiled call per plane); both give the same values."""
+    from mitpiv.reconstruct import _drjit
+
+    engine = engine or ("drjit" if _drjit.available() else "numba")
+    flat = np.concatenate([np.asarray(im, np.float64).ravel() for im in imgs])
+    nyx = grid.shape[1] * grid.shape[2]
+    xs, ys, zs = grid.x_mm, grid.y_mm, grid.z_mm
+    idx, init = [], []
+    if engine == "drjit":
+        step = max(1, _drjit.BLOCK_VOXELS // nyx)
+        shapes = [im.shape for im in imgs]
+        for k0 in track(range(0, grid.shape[0], step), desc=f"{what}: MLOS plane blocks", progress=progress,
+                        unit="block"):
+            val, seen = _drjit.mlos_block(flat, shapes, rows, xs, ys, zs[k0:k0 + step], 1.0 / len(imgs))
+            sel = np.flatnonzero(val > 0 if prune else seen)
+            sel += k0 * nyx
+            idx.append(sel)
+            # no copies where none are needed: fresh 100 MB arrays cost ~0.4 s of page faults here
+            init.append(val if len(sel) == len(val) else val[sel - k0 * nyx])
+        return (idx[0], init[0]) if len(idx) == 1 else (np.concatenate(idx), np.concatenate(init))
     k = kernels()
-    flat = np.concatenate([im.ravel() for im in imgs])
     offs = np.concatenate([[0], np.cumsum([im.size for im in imgs])[:-1]]).astype(np.int64)
     hs = np.array([im.shape[0] for im in imgs], np.int64)
     ws = np.array([im.shape[1] for im in imgs], np.int64)
-    nyx = grid.shape[1] * grid.shape[2]
-    xs, ys, zs = grid.x_mm, grid.y_mm, grid.z_mm
     val = np.empty(nyx)
     keep = np.empty(nyx, np.bool_)
-    idx, init = [], []
     for kz in track(range(grid.shape[0]), desc=f"{what}: MLOS planes", progress=progress, unit="plane"):
         k["mlos_pinhole"](xs, ys, float(zs[kz]), rows, flat, offs, hs, ws, 1.0 / len(imgs), bool(prune), val, keep)
         sel = np.flatnonzero(keep)
