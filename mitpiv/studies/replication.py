@@ -163,8 +163,10 @@ class Study:
 # ------------------------------------------------------------------------------ context
 def _run_point(fn, item, path: str):
     """Run ``fn(item)`` and store its JSON result at ``path`` (a Dask task or a local call)."""
+    from mitpiv._alloc import retain_freed_memory
     from mitpiv.io.records import write_json
 
+    retain_freed_memory()  # this process (a worker, or the main one) reuses freed pages: mitpiv._alloc
     result = fn(item)
     write_json(path, result)
     return result

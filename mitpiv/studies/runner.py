@@ -319,9 +319,11 @@ def run_stages(cfg: BaseModel, run_dir, stages: list[Stage], *, progress: Progre
     Raises :class:`~mitpiv.errors.FolderLockedError` when another process is running in
     ``run_dir``.
     """
+    from mitpiv._alloc import retain_freed_memory
     from mitpiv.io.atomic import folder_lock, fsync_dir
     from mitpiv.io.records import write_json
 
+    retain_freed_memory()  # large temporaries reuse freed pages (mitpiv._alloc: demo 48.7 -> 41.0 s)
     run = Path(run_dir)
     with folder_lock(run, what="run folder"):
         _clean(run, stages)
