@@ -7,6 +7,9 @@ Rows (each: our time, the baseline's, the ratio, the accuracy difference):
   ``--scale`` per lateral axis (1 = the published size): ours vs the frozen pre-issue code
   path (bench/reference_mart.py) vs a plain scipy.sparse MART on the same weights (matrix
   built once; row-action updates in blocks of pixels that share no voxel, which is exact).
+* The MLOS pass of MART's pinhole fast path: the Dr.Jit kernel (LLVM backend, float64,
+  what the library runs) vs the Numba kernel per plane (its fallback), and the float32
+  Dr.Jit variant that was measured and not kept (bench/drjit_mlos.py).
 * 3D multi-pass PIV (64-48-32, 75 % overlap, Lamb-Oseen vortex) on a volume of
   ``--piv-shape`` voxels: ours vs the frozen pre-issue piv3d (bench/reference_piv3d.py);
   OpenPIV's 3D single pass at 32^3 windows beside them (time and RMS error).
@@ -25,7 +28,9 @@ Rows (each: our time, the baseline's, the ratio, the accuracy difference):
   per voxel.
 
 The machine is shared: absolute times are noisy; the ratios are taken in the same run.
-``python bench/bench_speed.py [--quick]``.
+``python bench/bench_speed.py [--quick | --scale S] [--sections ...]``: a run of every section
+rewrites its block of docs/benchmarks.md (``speed-quick``, ``speed-full`` at scale 1) and
+the README's performance table; a run of some sections only prints.
 """
 
 import argparse
@@ -191,7 +196,7 @@ def drjit_rows(scale):
     same = np.array_equal(i1, i0)
     d = float(np.max(np.abs(v1 - v0)) / v0.max()) if same else float("nan")
     label = f"MLOS pass {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]}, 4 cameras"
-    backend = f"Dr.Jit {dr.__version__} LLVM backend (CPU, {os.cpu_count()} threads), float64"
+    backend = f"Dr.Jit {dr.__version__} LLVM backend (CPU, {dr.thread_count()} threads), float64"
     emit(label, t1, "Numba kernel per plane (float64)", t0,
          f"same {len(i1)} candidates: {same}; max abs diff {d:.1e} of max", f"ours: {backend}; best of 3")
     full = np.zeros(grid.n_voxels)

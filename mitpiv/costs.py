@@ -36,13 +36,16 @@ MAX_ITERATIONS = 10_000
 #: Share of the available memory a single array set may take before it is refused.
 MEMORY_FRACTION = 0.8
 
-# Throughputs (orders of magnitude, 2-core development machine, numba kernels):
+# Throughputs (orders of magnitude, 2-core development machine, compiled kernels). The MART
+# and PIV figures were measured on `make demo` at commit 5ea634e (bench/bench_demo.py): MART
+# 614 M voxel-camera updates (2 frames x 12.8 M voxels x 4 cameras x (5 + 1) sweeps, weights
+# built once) in 18.1 s; PIV 3.2e10 correlation voxels (x 3, see piv_cost) in 9.9 s.
 #: MART / SMART: voxel-camera updates per second per iteration.
-MART_VOXEL_CAMERA_PER_S = 5e7
+MART_VOXEL_CAMERA_PER_S = 3.5e7
 #: Refocusing: light-field samples (s, t, u, v) gathered per second per plane.
 REFOCUS_SAMPLES_PER_S = 2e8
 #: 3D PIV: correlation-window voxels (FFT of (2w)^3 per vector) per second.
-PIV_VOXELS_PER_S = 2e8
+PIV_VOXELS_PER_S = 2.5e9
 #: Seeding and advection: particles per second.
 PARTICLES_PER_S = 5e6
 

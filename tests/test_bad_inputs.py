@@ -428,9 +428,13 @@ def test_ctrl_c_during_a_real_reconstruction(tmp_path_factory, tmp_path):
                                                                         "frame": 0})))
     out = tmp_path / "v.npz"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    # the child starts with Ctrl-C's default disposition: a test suite launched in the
+    # background of a non-interactive shell (`nohup make test &`) ignores SIGINT, the child
+    # would inherit that, and Python installs no KeyboardInterrupt handler for an ignored signal
     proc = subprocess.Popen([sys.executable, "-m", "mitpiv.cli", "reconstruct", *paths, "--out", str(out), "--bounds",
                              "0", "0.8", "0", "0.8", "0", "0.8", "--voxel-mm", "0.01", "--iterations", "10000"],
-                            stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+                            stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     seen = ""
     t0 = time.monotonic()
     while "estimate for reconstruct" not in seen and time.monotonic() - t0 < 120:

@@ -46,7 +46,7 @@ from scipy import ndimage
 from mitpiv.errors import ConfigError, MitpivWarning
 from mitpiv.grid import VoxelGrid
 from mitpiv.physics.camera import PinholeCamera
-from mitpiv.progress import Progress, track
+from mitpiv.progress import Progress, bar, track
 from mitpiv.reconstruct._kernels import CIRCLE, GAUSSIAN, PIXEL_RADIUS, camera_row, kernels
 from mitpiv.reconstruct.mapping import CameraMapping, PinholeMapping, mapping_from_metadata
 
@@ -337,7 +337,8 @@ def mlos(images, mappings, grid: VoxelGrid, *, interpolation: str = "linear", ex
     ``P_c(x)`` of the voxel centre; zero where any camera sees no light or does not see the
     voxel. Computed in log space per plane (no underflow for many cameras or tiny values).
     Pinhole cameras with bilinear interpolation take one Dr.Jit kernel per block of planes
-    (:mod:`mitpiv.reconstruct._drjit`, the same values about 6x faster than per plane).
+    (:mod:`mitpiv.reconstruct._drjit`; 288x192x130 voxels, 4 cameras: 0.09 s against 1.2 s
+    for the per-plane NumPy path, values equal to float32 rounding).
 
     Parameters
     ----------
@@ -365,15 +366,16 @@ def mlos(images, mappings, grid: VoxelGrid, *, interpolation: str = "linear", ex
 
     rows = _pinhole_rows(maps) if interpolation == "linear" else None
     if rows is not None and _drjit.available():
-        # pinhole cameras, bilinear: one Dr.Jit kernel per block of planes (same values, ~6x faster)
         flat = np.concatenate([np.asarray(im, np.float64).ravel() for im in imgs])
         nyx = grid.shape[1] * grid.shape[2]
         step = max(1, _drjit.BLOCK_VOXELS // nyx)
         out = np.empty(grid.shape, np.float32)
-        for k0 in track(range(0, grid.shape[0], step), desc="mlos: plane blocks", progress=progress, unit="block"):
-            val, _ = _drjit.mlos_block(flat, [im.shape for im in imgs], rows, grid.x_mm, grid.y_mm,
-                                       grid.z_mm[k0:k0 + step], e)
-            out[k0:k0 + step] = val.reshape(-1, *grid.shape[1:])
+        with bar(grid.shape[0], desc="mlos: planes", progress=progress, unit="plane") as b:
+            for k0 in range(0, grid.shape[0], step):
+                val, _ = _drjit.mlos_block(flat, [im.shape for im in imgs], rows, grid.x_mm, grid.y_mm,
+                                           grid.z_mm[k0:k0 + step], e)
+                out[k0:k0 + step] = val.reshape(-1, *grid.shape[1:])
+                b.update(len(grid.z_mm[k0:k0 + step]))
         return out
     return _volume_by_planes(imgs, maps, grid, interpolation, "multiplicative", e, progress=progress, what="mlos")
 
@@ -597,14 +599,15 @@ def _candidates_pinhole(imgs, rows, grid, prune, progress, what, engine=None):
     if engine == "drjit":
         step = max(1, _drjit.BLOCK_VOXELS // nyx)
         shapes = [im.shape for im in imgs]
-        for k0 in track(range(0, grid.shape[0], step), desc=f"{what}: MLOS plane blocks", progress=progress,
-                        unit="block"):
-            val, seen = _drjit.mlos_block(flat, shapes, rows, xs, ys, zs[k0:k0 + step], 1.0 / len(imgs))
-            sel = np.flatnonzero(val > 0 if prune else seen)
-            sel += k0 * nyx
-            idx.append(sel)
-            # no copies where none are needed: fresh 100 MB arrays cost ~0.4 s of page faults here
-            init.append(val if len(sel) == len(val) else val[sel - k0 * nyx])
+        with bar(grid.shape[0], desc=f"{what}: MLOS planes", progress=progress, unit="plane") as b:
+            for k0 in range(0, grid.shape[0], step):
+                val, seen = _drjit.mlos_block(flat, shapes, rows, xs, ys, zs[k0:k0 + step], 1.0 / len(imgs))
+                sel = np.flatnonzero(val > 0 if prune else seen)
+                # no copies where none are needed: fresh 100 MB arrays cost ~0.4 s of page faults here
+                init.append(val if len(sel) == len(val) else val[sel])
+                sel += k0 * nyx
+                idx.append(sel)
+                b.update(len(zs[k0:k0 + step]))
         return (idx[0], init[0]) if len(idx) == 1 else (np.concatenate(idx), np.concatenate(init))
     k = kernels()
     offs = np.concatenate([[0], np.cumsum([im.size for im in imgs])[:-1]]).astype(np.int64)
