@@ -8,8 +8,8 @@ Rows (each: our time, the baseline's, the ratio, the accuracy difference):
   path (bench/reference_mart.py) vs a plain scipy.sparse MART on the same weights (matrix
   built once; row-action updates in blocks of pixels that share no voxel, which is exact).
 * The MLOS pass of MART's pinhole fast path: the Dr.Jit kernel (LLVM backend, float64,
-  what the library runs) vs the Numba kernel per plane (its fallback), and the float32
-  Dr.Jit variant that was measured and not kept (bench/drjit_mlos.py).
+  what the library runs) vs the Numba kernel per plane (its fallback), and the same kernel
+  in float32, measured and not kept.
 * 3D multi-pass PIV (64-48-32, 75 % overlap, Lamb-Oseen vortex) on a volume of
   ``--piv-shape`` voxels: ours vs the frozen pre-issue piv3d (bench/reference_piv3d.py);
   OpenPIV's 3D single pass at 32^3 windows beside them (time and RMS error).
@@ -168,9 +168,13 @@ def drjit_rows(scale):
     what the library runs) against the Numba kernel per plane (the fallback) on the MART
     case's images and grid, and the float32 Dr.Jit variant that was not kept."""
     import drjit as dr
-    from drjit_mlos import mlos_drjit
 
     from mitpiv.reconstruct import _drjit, tomo
+
+    def mlos32(imgs, rows, grid):
+        flat = np.concatenate([np.asarray(im, np.float32).ravel() for im in imgs])
+        return _drjit.mlos_block(flat, [im.shape for im in imgs], rows, grid.x_mm, grid.y_mm, grid.z_mm,
+                                 1.0 / len(imgs), dtype=np.float32)[0]
 
     if not _drjit.available():
         print("drjit: Dr.Jit's LLVM backend is not available; rows skipped")
@@ -182,7 +186,7 @@ def drjit_rows(scale):
     si, sm = tomo._check_images(small[2], small[0], small[3], "mlos")
     for eng in ("drjit", "numba"):  # compile / load both kernels outside the timings
         tomo._candidates_pinhole(si, tomo._pinhole_rows(sm), small[3], True, False, "b", engine=eng)
-    mlos_drjit(si, tomo._pinhole_rows(sm), small[3])
+    mlos32(si, tomo._pinhole_rows(sm), small[3])
 
     def best(f):
         ts = []
@@ -201,7 +205,7 @@ def drjit_rows(scale):
          f"same {len(i1)} candidates: {same}; max abs diff {d:.1e} of max", f"ours: {backend}; best of 3")
     full = np.zeros(grid.n_voxels)
     full[i1] = v1
-    v32, t32 = best(lambda: mlos_drjit(imgs, rows, grid))
+    v32, t32 = best(lambda: mlos32(imgs, rows, grid))
     flips = int(np.count_nonzero((v32 > 0) != (full > 0)))
     emit(label + ", Dr.Jit float32 (not kept)", t32, "ours (Dr.Jit float64)", t1,
          f"max abs diff {float(np.max(np.abs(v32 - full)) / full.max()):.1e} of max; {flips} voxels change candidate status",

@@ -41,32 +41,36 @@ def available() -> bool:
         return False
 
 
-def mlos_block(flat, shapes, rows, xs, ys, zs, exponent):
+def mlos_block(flat, shapes, rows, xs, ys, zs, exponent, *, dtype=np.float64):
     """MLOS of every voxel of the planes ``zs`` (flat z, y, x order): ``(val, seen)``,
     ``val = exp(exponent sum_c log I_c(P_c(x)))`` (0 when a camera does not see the voxel
-    or samples 0) as float64 and ``seen`` (every camera sees the voxel's projected centre
+    or samples 0) as ``dtype`` and ``seen`` (every camera sees the voxel's projected centre
     within its image, ``0 <= u <= w``, ``0 <= v <= h``) as bool, as ``_kernels.mlos_pinhole``.
 
-    ``flat``: the images raveled one after another (float64); ``shapes``: their (h, w);
-    ``rows``: the packed cameras (``_kernels.camera_row``)."""
+    ``flat``: the images raveled one after another; ``shapes``: their (h, w);
+    ``rows``: the packed cameras (``_kernels.camera_row``). ``dtype`` float32 runs the same
+    kernel in single precision (the variant measured and not kept, see the module notes;
+    ``bench/bench_speed.py --sections drjit``)."""
     import drjit as dr
-    from drjit.llvm import Bool, Float64, UInt32
+    from drjit.llvm import Bool, Float, Float64, UInt32
+
+    F = {np.dtype(np.float64): Float64, np.dtype(np.float32): Float}[np.dtype(dtype)]
 
     nz, ny, nx = len(zs), len(ys), len(xs)
     n = nz * ny * nx
-    img = Float64(np.ascontiguousarray(flat, np.float64))
-    gx, gy, gz = (Float64(np.ascontiguousarray(a, np.float64)) for a in (xs, ys, zs))
+    img = F(np.ascontiguousarray(flat, dtype))
+    gx, gy, gz = (F(np.ascontiguousarray(a, dtype)) for a in (xs, ys, zs))
     i = dr.arange(UInt32, n)
-    x = dr.gather(Float64, gx, i % nx)
-    y = dr.gather(Float64, gy, (i // nx) % ny)
-    z = dr.gather(Float64, gz, i // (nx * ny))
-    lg = dr.zeros(Float64, n)
+    x = dr.gather(F, gx, i % nx)
+    y = dr.gather(F, gy, (i // nx) % ny)
+    z = dr.gather(F, gz, i // (nx * ny))
+    lg = dr.zeros(F, n)
     seen = dr.full(Bool, True, n)
     off = 0
     for (h, w), cam in zip(shapes, rows, strict=True):
         # opaque parameters: one compiled kernel serves every camera set of the same count
-        c = [dr.opaque(Float64, float(v)) for v in cam]
-        hf, wf = dr.opaque(Float64, float(h)), dr.opaque(Float64, float(w))
+        c = [dr.opaque(F, float(v)) for v in cam]
+        hf, wf = dr.opaque(F, float(h)), dr.opaque(F, float(w))
         hu, wu, base = dr.opaque(UInt32, int(h)), dr.opaque(UInt32, int(w)), dr.opaque(UInt32, int(off))
         px, py, pz = x - c[9], y - c[10], z - c[11]
         xc = c[0] * px + c[1] * py + c[2] * pz
@@ -84,16 +88,16 @@ def mlos_block(flat, shapes, rows, xs, ys, zs, exponent):
         ok = front & (rr >= 0.0) & (rr <= hf - 1.0) & (cc >= 0.0) & (cc <= wf - 1.0)
         r0 = dr.minimum(UInt32(dr.floor(dr.select(ok, rr, 0.0))), dr.maximum(hu, 2) - 2)
         c0 = dr.minimum(UInt32(dr.floor(dr.select(ok, cc, 0.0))), dr.maximum(wu, 2) - 2)
-        fr, fc = rr - Float64(r0), cc - Float64(c0)
+        fr, fc = rr - F(r0), cc - F(c0)
         r1, c1 = dr.minimum(r0 + 1, hu - 1), dr.minimum(c0 + 1, wu - 1)
-        g00 = dr.gather(Float64, img, base + r0 * wu + c0, ok)
-        g01 = dr.gather(Float64, img, base + r0 * wu + c1, ok)
-        g10 = dr.gather(Float64, img, base + r1 * wu + c0, ok)
-        g11 = dr.gather(Float64, img, base + r1 * wu + c1, ok)
+        g00 = dr.gather(F, img, base + r0 * wu + c0, ok)
+        g01 = dr.gather(F, img, base + r0 * wu + c1, ok)
+        g10 = dr.gather(F, img, base + r1 * wu + c0, ok)
+        g11 = dr.gather(F, img, base + r1 * wu + c1, ok)
         s = (1.0 - fr) * ((1.0 - fc) * g00 + fc * g01) + fr * ((1.0 - fc) * g10 + fc * g11)
         pos = ok & (s > 0.0)
         lg += dr.select(pos, dr.log(dr.select(pos, s, 1.0)), -math.inf)
         off += h * w
-    val = dr.exp(lg * dr.opaque(Float64, float(exponent)))
+    val = dr.exp(lg * dr.opaque(F, float(exponent)))
     dr.eval(val, seen)
     return val.numpy(), seen.numpy()

@@ -44,6 +44,7 @@ def kernels() -> dict:
         return _K
     # helpers called by other kernels: module globals, not closure cells (see mitpiv._numba)
     global circle_overlap, weight, inside_support, mart_row, mart_row_f32, pinhole, sample_linear, footprint
+    global voxel_centre
     nb = numba()
 
     @nb.njit(inline="always", cache=True)
@@ -365,19 +366,23 @@ def kernels() -> dict:
         return (uu, vv, 3.0 * math.sqrt(lam) + 0.75, cyy / det, -cxy / det, cxx / det,
                 area / (2.0 * math.pi * math.sqrt(det)))
 
+    @nb.njit(inline="always", cache=True)
+    def voxel_centre(flat, xs, ys, zs):
+        """World centre (x, y, z) of the voxel with flat (z, y, x) index ``flat``."""
+        nx = xs.shape[0]
+        nyx = ys.shape[0] * nx
+        k = flat // nyx
+        rest = flat - k * nyx
+        j = rest // nx
+        return xs[rest - j * nx], ys[j], zs[k]
+
     @nb.njit(parallel=True, cache=True)
     def footprints_pinhole(idx, xs, ys, zs, cam, d0, d1, d2, model, psf2, u, v, rad, p0, p1, p2, p3):
         """Projection (rounded to float32, as stored) and weight-model footprint (support
         radius and the four model parameters, see ``tomo._footprints``) of voxels ``idx``."""
-        nyx = ys.shape[0] * xs.shape[0]
-        nx = xs.shape[0]
         for q in nb.prange(idx.shape[0]):
-            flat = idx[q]
-            k = flat // nyx
-            rest = flat - k * nyx
-            j = rest // nx
-            i = rest - j * nx
-            uu, vv, rr, q0, q1, q2, q3 = footprint(cam, xs[i], ys[j], zs[k], d0, d1, d2, model, psf2)
+            x, y, z = voxel_centre(idx[q], xs, ys, zs)
+            uu, vv, rr, q0, q1, q2, q3 = footprint(cam, x, y, z, d0, d1, d2, model, psf2)
             # rounded to float32 also when the outputs are float64 (the assembly reads them so)
             u[q], v[q], rad[q] = np.float32(uu), np.float32(vv), np.float32(rr)
             p0[q], p1[q], p2[q], p3[q] = np.float32(q0), np.float32(q1), np.float32(q2), np.float32(q3)
@@ -391,17 +396,11 @@ def kernels() -> dict:
         whose projected centre lies farther than its support reaches is not checked pixel
         by pixel (it cannot touch a zero pixel)."""
         h, w = img.shape
-        nyx = ys.shape[0] * xs.shape[0]
-        nx = xs.shape[0]
         for a in nb.prange(idx.shape[0]):
             if not alive[a]:
                 continue
-            flat = idx[a]
-            k = flat // nyx
-            rest = flat - k * nyx
-            j = rest // nx
-            i = rest - j * nx
-            uu, vv, rr, q0, q1, q2, q3 = footprint(cam, xs[i], ys[j], zs[k], d0, d1, d2, model, psf2)
+            x, y, z = voxel_centre(idx[a], xs, ys, zs)
+            uu, vv, rr, q0, q1, q2, q3 = footprint(cam, x, y, z, d0, d1, d2, model, psf2)
             ua, va, r = np.float32(uu), np.float32(vv), np.float32(rr)
             if ua >= 0.0 and va >= 0.0 and ua < w and va < h and zero_dist[int(va), int(ua)] > r + 2.0:
                 continue
@@ -415,15 +414,9 @@ def kernels() -> dict:
     def pinhole_image_rows(idx, xs, ys, zs, cam, h, crow):
         """Image row (clamped onto 0..h-1) of the projected centre of voxels ``idx``, from
         the projection rounded to float32 as :func:`footprints_pinhole` stores it."""
-        nyx = ys.shape[0] * xs.shape[0]
-        nx = xs.shape[0]
         for q in nb.prange(idx.shape[0]):
-            flat = idx[q]
-            k = flat // nyx
-            rest = flat - k * nyx
-            j = rest // nx
-            i = rest - j * nx
-            _, _, _, _, vv, _, _ = pinhole(cam, xs[i], ys[j], zs[k])
+            x, y, z = voxel_centre(idx[q], xs, ys, zs)
+            _, _, _, _, vv, _, _ = pinhole(cam, x, y, z)
             r = math.floor(np.float64(np.float32(vv)))
             crow[q] = 0 if not r > 0 else (h - 1 if r > h - 1 else np.int32(r))
 
