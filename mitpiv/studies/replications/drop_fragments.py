@@ -480,9 +480,9 @@ def run(ctx) -> ReplicationResult:
         "as in Fig. 25. DIH: 7.4 um pixels, 532 nm (assumed), a crop of the sensor, the same fragments. Pellets: 2 mm "
         f"at {PELLET_SPEED_M_S:.0f} m/s (Mach {PELLET_SPEED_M_S / SOUND_SPEED_M_S:.2f}; the paper gives no speed), "
         "plenoptic at |M| = 0.283 without a dewarp (as the paper); their shocks as phase screens in the DIH beam.",
-        "## Not yet replicated\n\n- a full run and its wall time (measured on this machine, loaded, for the full "
-        "6600 x 4400 sensor: decoding 9.5 s, 2.0 s per refocused plane at one sample per lenslet, so about 33 min "
-        "per 1000-plane stack and 4x that supersampled; 0.63 GB per stack, memory-mapped);\n- enough realisations "
+        "## Not yet replicated\n\n- a full run and its wall time (the full 6600 x 4400 sensor's 1000-plane stack, "
+        "2x supersampled as here, measured by `python bench/bench_lightfield.py --full` on 2 cores: decoding 9.7 s, "
+        "92 s for the 1000 planes, 2.72 GB streamed to disk);\n- enough realisations "
         "for the statistics (the paper: 250 image pairs per condition; the quick crop holds a dozen fragments);\n"
         "- the Figs. 26-27 depth-uncertainty curves with eq. 22 (plenoptic) and eq. 23 (DIH);\n"
         "- [27]'s fragment-size and velocity fits (the size law is a placeholder: q = 0.0603, n = 0);\n"
