@@ -27,6 +27,11 @@ drop-impact fragments and shotgun pellets (seed paper 003, chapters IV-VI).
 * The fragment-size power law ``d/d0 = q tau^n`` (Figs. 28-29): :func:`power_law_fit`
   (least squares on the logarithms).
 * The depth-resolution limit of DIH, eq. 23 ``dz = d^2 / lambda``: :func:`dih_depth_resolution`.
+* The depth-resolution limit of the plenoptic camera, eq. 22 (Deem et al. 2015, the paper's
+  [29]): :func:`plenoptic_depth_resolution`, as printed and in a consistent paraxial form.
+  The two differ by a factor of 5 at the paper's parameters; the paper quotes 0.24 mm, which
+  is neither (0.468 mm printed, 0.097 mm paraxial; the printed form gives 0.237 mm with twice
+  the pixels per lenslet): see the function's notes.
 
 All hand-written NumPy (a few lines of linear algebra each); no loops over particles.
 """
@@ -43,7 +48,7 @@ from mitpiv.errors import ConfigError
 __all__ = ["PAPER_DOT_CARD", "StackDewarp", "fit_stack_dewarp", "dot_card_points", "dot_card_observations",
            "locate_dots_in_stack",
            "paper_alphas", "PAPER_ALPHA_RANGES", "model_error", "z_uncertainty", "power_law_fit",
-           "dih_depth_resolution"]
+           "dih_depth_resolution", "plenoptic_depth_resolution", "DEPTH_RESOLUTION_FORMS"]
 
 #: The paper's dot card and traverse (ch. V.A): 1 mm dots at 3 mm pitch, 25 depths every
 #: 2.5 mm from 30 mm in front of to 30 mm behind the focal plane.
@@ -321,3 +326,61 @@ def dih_depth_resolution(d_mm, wavelength_nm):
     if not lam > 0:
         raise ConfigError(f"dih_depth_resolution: wavelength_nm must be > 0, got {wavelength_nm!r}.")
     return np.asarray(d_mm, dtype=np.float64) ** 2 / lam
+
+
+#: The forms of :func:`plenoptic_depth_resolution`.
+DEPTH_RESOLUTION_FORMS = ("printed", "paraxial")
+
+
+def plenoptic_depth_resolution(*, aperture_mm, pixels_per_lenslet, lenslet_mm, focal_length_mm, image_distance_mm,
+                               form: str = "printed") -> float:
+    """Eq. 22, the worst-case (nominal focal plane) depth resolution of a plenoptic 1.0
+    camera [mm] (Deem et al. 2015, the paper's [29]).
+
+    Each term of eq. 22 is the object distance ``z(h)`` of the on-axis point whose ray
+    through the main lens at height ``h`` lands on the edge of the central lenslet, ``d_mu /
+    2`` off the axis on the far side: ``h = d_M (1 - 2/N_p) / 2`` (the aperture less the two
+    edge pixels of the lenslet's angular sampling) and ``h = d_M / 2`` (the full aperture);
+    ``dz = z(h_1) - z(h_2)``.
+
+    form "printed"
+        The paper's expression, ``z(h) = h / tan(h/f_M - atan((2h + d_mu) / (2 s_i)))``. Its
+        second term is garbled in print (an angle ``d_M`` less an angle, over ``2 s_i``) and
+        is read as the first term with ``N_p -> infinity``, the only reading that keeps its
+        dimensions. It mixes the paraxial lens deflection ``h/f_M`` with exact ray angles
+        (atan), so even with ``d_mu = 0`` the two terms differ (0.37 mm at the paper's
+        parameters), where a point in focus images to a point and the resolution must
+        vanish.
+    form "paraxial"
+        The same construction in the paraxial thin lens throughout:
+        ``1/z(h) = 1/f_M - 1/s_i - d_mu / (2 h s_i)``; 0 for ``d_mu = 0``.
+
+    At the paper's parameters (f/2.8 105 mm lens, N_p = 14, 77 um lenslets, s_i = 191.5 mm)
+    the printed form gives 0.468 mm and the paraxial one 0.097 mm; the paper quotes "about
+    0.24 mm" without the numbers it used. The printed form gives 0.237 mm at N_p = 28, twice
+    the pixels across a lenslet: a possible reading, not a stated one. In both forms dz grows
+    with the lenslet diameter (paraxially in proportion to it), where the paper's text says
+    the resolution improves as the microlens diameter increases; it does improve with N_p.
+    """
+    vals = {"aperture_mm": aperture_mm, "lenslet_mm": lenslet_mm, "focal_length_mm": focal_length_mm,
+            "image_distance_mm": image_distance_mm}
+    for name, v in vals.items():
+        if not (np.isfinite(v) and v > 0):
+            raise ConfigError(f"plenoptic_depth_resolution: {name} must be finite and > 0, got {v!r}.")
+    if not (np.isfinite(pixels_per_lenslet) and pixels_per_lenslet > 2):
+        raise ConfigError(f"plenoptic_depth_resolution: pixels_per_lenslet must be > 2 (the two edge pixels are "
+                          f"left out), got {pixels_per_lenslet!r}.")
+    if image_distance_mm <= focal_length_mm:
+        raise ConfigError(f"plenoptic_depth_resolution: image_distance_mm ({image_distance_mm}) must exceed "
+                          f"focal_length_mm ({focal_length_mm}) for a real image.")
+    if form not in DEPTH_RESOLUTION_FORMS:
+        raise ConfigError(f"plenoptic_depth_resolution: form must be one of {DEPTH_RESOLUTION_FORMS}, got {form!r}.")
+    f, si, dmu = float(focal_length_mm), float(image_distance_mm), float(lenslet_mm)
+    h1, h2 = 0.5 * aperture_mm * (1.0 - 2.0 / pixels_per_lenslet), 0.5 * aperture_mm
+
+    def z(h):
+        if form == "printed":
+            return h / math.tan(h / f - math.atan((2.0 * h + dmu) / (2.0 * si)))
+        return 1.0 / (1.0 / f - 1.0 / si - dmu / (2.0 * h * si))
+
+    return float(z(h1) - z(h2))

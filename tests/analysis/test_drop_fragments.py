@@ -1,7 +1,7 @@
 """The measures and the dot-card dewarp of the plenoptic vs DIH drop-fragment study (seed
 paper 003): the stack dewarp against a known polynomial and against the paper's camera with
 and without main-lens distortion, the paper's focal-stack alphas, the model error (Fig. 25)
-and z uncertainty (Table 2), the power-law fit (Figs. 28-29) and eq. 23."""
+and z uncertainty (Table 2), the power-law fit (Figs. 28-29), eq. 22 and eq. 23."""
 
 import numpy as np
 import pytest
@@ -14,6 +14,7 @@ from mitpiv.analysis.drop_fragments import (
     fit_stack_dewarp,
     model_error,
     paper_alphas,
+    plenoptic_depth_resolution,
     power_law_fit,
     z_uncertainty,
 )
@@ -166,3 +167,61 @@ def test_locate_dots_in_stack():
     # depth: the sharpness peak is symmetric about the dot's depth; a 3-point Gaussian on
     # 0.2 mm planes refines it to a fraction of a plane
     np.testing.assert_allclose(zd[order], ref[:, 2], atol=0.06)
+
+
+PAPER_22 = dict(aperture_mm=105.0 / 2.8, pixels_per_lenslet=14.0, lenslet_mm=0.077, focal_length_mm=105.0,
+                image_distance_mm=191.5)
+
+
+def test_eq22_printed_form_is_the_printed_expression():
+    """The printed form against eq. 22 typed out here in float64 from the paper (first
+    term as printed; second term the first with N_p -> infinity), at the paper's camera."""
+    import math
+
+    dm, npx, dmu, fm, si = 105.0 / 2.8, 14.0, 0.077, 105.0, 191.5
+    a = dm * (1 - 2 / npx)
+    ref = a / (2 * math.tan(a / (2 * fm) - math.atan((a + dmu) / (2 * si)))) \
+        - dm / (2 * math.tan(dm / (2 * fm) - math.atan((dm + dmu) / (2 * si))))
+    assert plenoptic_depth_resolution(**PAPER_22) == pytest.approx(ref, rel=1e-12)
+    assert ref == pytest.approx(0.468, abs=5e-4)
+
+
+def test_eq22_paraxial_form_against_a_ray_trace():
+    """The paraxial form against an independent construction: ray-transfer matrices (free
+    space, thin lens, free space) and a root find for the on-axis object distance whose ray
+    at height h lands d_mu/2 beyond the axis on the lenslet plane; 1e-9 relative (the root
+    finder's tolerance). With d_mu -> 0 the resolution vanishes (a point in focus images to
+    a point), where the printed form keeps 0.37 mm."""
+    from scipy.optimize import brentq
+
+    def landing(z, h, f, si):
+        # ray from the axis at distance z to height h on the lens: angle h / z
+        m = np.array([[1.0, si], [0.0, 1.0]]) @ np.array([[1.0, 0.0], [-1.0 / f, 1.0]])
+        return (m @ np.array([h, h / z]))[0]
+
+    def z_of(h, dmu):
+        return brentq(lambda z: landing(z, h, 105.0, 191.5) + dmu / 2, 150.0, 400.0, xtol=1e-12, rtol=1e-14)
+
+    h1, h2 = 0.5 * 37.5 * (1 - 2 / 14), 0.5 * 37.5
+    ref = z_of(h1, 0.077) - z_of(h2, 0.077)
+    got = plenoptic_depth_resolution(**PAPER_22, form="paraxial")
+    assert got == pytest.approx(ref, rel=1e-9)
+    assert got == pytest.approx(0.0971, abs=1e-4)
+    tiny = {**PAPER_22, "lenslet_mm": 1e-9}
+    assert abs(plenoptic_depth_resolution(**tiny, form="paraxial")) < 1e-8
+    assert plenoptic_depth_resolution(**tiny) == pytest.approx(0.370, abs=1e-3)
+    # more pixels per lenslet resolve depth better; larger lenslets worse (dz grows with d_mu)
+    assert plenoptic_depth_resolution(**{**PAPER_22, "pixels_per_lenslet": 28.0}, form="paraxial") < got
+    assert plenoptic_depth_resolution(**{**PAPER_22, "lenslet_mm": 0.1}, form="paraxial") > got
+
+
+@pytest.mark.parametrize("bad, match", [
+    ({"pixels_per_lenslet": 2.0}, "pixels_per_lenslet must be > 2"),
+    ({"aperture_mm": 0.0}, "aperture_mm must be finite and > 0"),
+    ({"lenslet_mm": float("nan")}, "lenslet_mm must be finite"),
+    ({"image_distance_mm": 100.0}, "must exceed focal_length_mm"),
+    ({"form": "exact"}, "form must be one of"),
+])
+def test_eq22_bad_inputs(bad, match):
+    with pytest.raises(ConfigError, match=match):
+        plenoptic_depth_resolution(**{**PAPER_22, **bad})

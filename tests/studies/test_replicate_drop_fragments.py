@@ -31,6 +31,12 @@ def test_quick_run_schema_and_ids(tmp_path):
         assert rows[k]["ours"] is None or (math.isfinite(rows[k]["ours"]) and rows[k]["ours"] >= 0)
     c = res["curves"]["mean_d_over_d0_we784"]
     assert c["x"] == [2.6, 5.1, 7.7] and len(c["y"]["plenoptic"]) == 3
+    # eq. 22 at the paper's camera (printed form; the finding is in the row's note) and the
+    # theoretical curves of Figs. 26-27 (eq. 23 at 532 nm: dz/d = d/lambda, 1880 at d = 1 mm)
+    assert abs(rows["plenoptic_dz_theory_mm"]["ours"] - 0.468) < 1e-3 and rows["plenoptic_dz_theory_mm"]["agrees"] is False
+    dih = res["curves"]["dz_over_d_theory_dih"]
+    assert abs(dih["y"]["eq. 23, 532 nm"][-1] / (1.0 / 532e-6) - 1) < 1e-12 and dih["x"][-1] == 1.0
+    assert set(res["curves"]["dz_over_d_theory_plenoptic"]["y"]) == {"eq. 22 printed", "eq. 22 paraxial"}
     assert (tmp_path / "report.md").is_file()
 
 

@@ -356,8 +356,16 @@ def dih_shock_point(item: dict) -> dict:
 
 
 def run(ctx) -> ReplicationResult:
-    from mitpiv.analysis.drop_fragments import model_error, power_law_fit, z_uncertainty
+    from mitpiv.analysis.drop_fragments import (
+        DEPTH_RESOLUTION_FORMS,
+        dih_depth_resolution,
+        model_error,
+        plenoptic_depth_resolution,
+        power_law_fit,
+        z_uncertainty,
+    )
     from mitpiv.physics.drop_impact import condition
+    from mitpiv.physics.plenoptic import paper_003_camera
 
     sc = _scale(ctx.quick)
     items = [{"we": we, "tau": tau, "seed": ctx.seed, "crop_px": list(sc["crop_px"]), "planes": sc["planes"],
@@ -406,6 +414,21 @@ def run(ctx) -> ReplicationResult:
         if taus:
             curves[f"mean_d_over_d0_we{we}"] = Curve(x=taus, y={"plenoptic": [_nan(v) for v in ratio.tolist()]},
                                                      x_label="tau", y_label="d/d0")
+    # eq. 22 and eq. 23 (Figs. 26-27): the theoretical depth resolution of each technique
+    pcam = paper_003_camera("drop_impact")
+    eq22 = dict(aperture_mm=pcam.focal_length_mm / pcam.f_number, pixels_per_lenslet=pcam.mla_pitch_um / pcam.pixel_pitch_um,
+                lenslet_mm=pcam.mla_pitch_um * 1e-3, focal_length_mm=pcam.focal_length_mm,
+                image_distance_mm=pcam.image_distance_mm)
+    dz22 = {form: plenoptic_depth_resolution(**eq22, form=form) for form in DEPTH_RESOLUTION_FORMS}
+    dz22_np2 = plenoptic_depth_resolution(**{**eq22, "pixels_per_lenslet": 2 * eq22["pixels_per_lenslet"]})
+    d_axis = np.round(np.linspace(0.05, 1.0, 20), 3)
+    curves["dz_over_d_theory_plenoptic"] = Curve(
+        x=d_axis.tolist(), y={f"eq. 22 {form}": (dz22[form] / d_axis).tolist() for form in DEPTH_RESOLUTION_FORMS},
+        x_label="particle diameter [mm]", y_label="depth resolution / d (Fig. 26)")
+    curves["dz_over_d_theory_dih"] = Curve(
+        x=d_axis.tolist(), y={f"eq. 23, {DIH_WAVELENGTH_NM:.0f} nm": (dih_depth_resolution(d_axis, DIH_WAVELENGTH_NM)
+                                                                  / d_axis).tolist()},
+        x_label="particle diameter [mm]", y_label="depth resolution / d (Fig. 27)")
     pd = np.asarray(pel["diameters_mm"])
     pdz = np.asarray(pel["dz_mm"])
     pel_mean = float(pd.mean()) if pd.size else math.nan
@@ -434,6 +457,18 @@ def run(ctx) -> ReplicationResult:
                            f"(ours k1 = {K1_MAIN_LENS}); {cal['n_dots']} dots on {cal['cards_used']} cards of "
                            f"{len(card['card_depths_mm'])} (pitch {card['card_pitch_mm']} mm, dots {card['card_dot_mm']} mm); "
                            f"after the second-order dewarp: {cal['post_mean_abs_z_err_mm']:.3f} mm"),
+        compare_value("plenoptic_dz_theory_mm", "theoretical plenoptic depth resolution, eq. 22 as printed",
+                      "Sec. VI.A.2, eq. 22", 0.24, dz22["printed"], unit="mm", rel=0.05,
+                      why="a closed form: only its parameters can differ",
+                      note=f"the paper's camera: f/{pcam.f_number:g} {pcam.focal_length_mm:g} mm lens, N_p "
+                           f"{eq22['pixels_per_lenslet']:.0f}, {pcam.mla_pitch_um:g} um lenslets, s_i "
+                           f"{pcam.image_distance_mm:.1f} mm. The printed second term is garbled and read as the first "
+                           f"with N_p -> infinity; the printed form mixes a paraxial lens deflection with exact ray "
+                           f"angles (it keeps 0.37 mm for a point lenslet). The consistent paraxial form gives "
+                           f"{dz22['paraxial']:.3f} mm. The printed form lands near 0.24 mm with other parameters, e.g. "
+                           f"{dz22_np2:.3f} mm with N_p {2 * eq22['pixels_per_lenslet']:.0f} (or 0.249 mm at f/4 and "
+                           "s_i 210 mm), so which the paper used cannot be told from its value "
+                           "(mitpiv.analysis.drop_fragments.plenoptic_depth_resolution)"),
         compare_trend("shock_bands_dih_not_plenoptic", "shock bands: in DIH (collimated laser), not in plenoptic "
                       "(diffuse white light)", "Figs. 30-31", "bands in DIH only",
                       shock["sd_with"], bool(shock["sd_with"] > 10 * max(shock["sd_without"], 1e-6)),
@@ -484,7 +519,8 @@ def run(ctx) -> ReplicationResult:
         "2x supersampled as here, measured by `python bench/bench_lightfield.py --full` on 2 cores: decoding 9.7 s, "
         "92 s for the 1000 planes, 2.72 GB streamed to disk);\n- enough realisations "
         "for the statistics (the paper: 250 image pairs per condition; the quick crop holds a dozen fragments);\n"
-        "- the Figs. 26-27 depth-uncertainty curves with eq. 22 (plenoptic) and eq. 23 (DIH);\n"
+        "- the Figs. 26-27 measured depth uncertainties per particle beside the theoretical curves (the curves "
+        "dz_over_d_theory_plenoptic and dz_over_d_theory_dih are computed; the per-particle uncertainty is not);\n"
         "- [27]'s fragment-size and velocity fits (the size law is a placeholder: q = 0.0603, n = 0);\n"
         "- the DIH sizing and depth accuracy on the same fragments against [27]'s 0.72 d.",
     ]
