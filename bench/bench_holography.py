@@ -124,6 +124,9 @@ def study(quick):
     import mitsuba as mi
 
     from mitpiv.physics.droplets import drop_impact_field, pellet_field
+    from mitpiv.render.variant import ensure_variant
+
+    ensure_variant()  # the sensor dicts below build Mitsuba transforms
 
     def sensor(res, focus):
         return {"type": "plenoptic", "pixel_pitch_um": 5.5, "focal_length_mm": 50.0, "f_number": 2.8,
