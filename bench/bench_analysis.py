@@ -188,6 +188,9 @@ def backlit_study():
 
 
 def main():
+    from mitpiv.render.variant import ensure_variant
+
+    ensure_variant()  # Mitsuba objects below (importing mitpiv selects no variant)
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="128x128x64 PIV pair")
     args = ap.parse_args()

@@ -33,6 +33,9 @@ def timed(sc, spp):
 
 
 def main():
+    from mitpiv.render.variant import ensure_variant
+
+    ensure_variant()  # Mitsuba objects below (importing mitpiv selects no variant)
     tmp = Path(tempfile.mkdtemp())
     cam = camera(res=(512, 512))
     pts = seed_box((-14, -14, -3), (14, 14, 3), count=20000, seed=0).positions_mm

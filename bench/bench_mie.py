@@ -128,6 +128,9 @@ def accuracy(ply, cam):
 
 
 def main():
+    from mitpiv.render.variant import ensure_variant
+
+    ensure_variant()  # Mitsuba objects below (importing mitpiv selects no variant)
     tmp = Path(tempfile.mkdtemp())
     p = seed_box((-14, -14, -3), (14, 14, 3), count=20000, diameter_um=1.0, distribution="lognormal", geometric_std=1.3, seed=0)
     ply = write_particles_ply(tmp / "p.ply", p.positions_mm, p.diameters_um, proxy_radius_mm=0.01)

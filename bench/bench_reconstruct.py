@@ -219,6 +219,9 @@ def plot(rows, path):
 
 
 def main(argv=None):
+    from mitpiv.render.variant import ensure_variant
+
+    ensure_variant()  # Mitsuba objects below (importing mitpiv selects no variant)
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--big", action="store_true", help="also the 480x320x130, 4-camera, 40-iteration case")
     a = ap.parse_args(argv)
