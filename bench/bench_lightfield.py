@@ -49,6 +49,9 @@ def synthetic_lf(cam, seed=0):
 
 
 def main():
+    from mitpiv.render.variant import ensure_variant
+
+    ensure_variant()  # Mitsuba objects below (importing mitpiv selects no variant)
     ap = argparse.ArgumentParser()
     ap.add_argument("--full", action="store_true")
     args = ap.parse_args()
