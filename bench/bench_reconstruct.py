@@ -203,9 +203,11 @@ def plot(rows, path):
     for name, setting, sec, q in rows:
         key = name if not name.startswith("MART 5") else f"MART 5 it ({setting.split()[0]})"
         series.setdefault(key, []).append((sec, q, setting))
-    for key, pts in series.items():
+    colours = plt.get_cmap("tab20").colors  # more series than the default cycle's 10 colours
+    for i, (key, pts) in enumerate(series.items()):
         pts.sort()
-        ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", label=key)
+        ax.plot([p[0] for p in pts], [p[1] for p in pts], "os^"[i % 3] + "-", color=colours[(2 * i) % 20 + (i >= 10)],
+                label=key)
     ax.set_xscale("log")
     ax.set_xlabel("time [s] (2 cores)")
     ax.set_ylabel("Q (tomographic) / Q* (plenoptic)")
