@@ -134,7 +134,7 @@ def main(argv=None):
     ours = min(runs["ours"], key=lambda x: x[0])
     worst, where, n = metric_diff(base[2], ours[2])
     stages = list(dict.fromkeys([*base[1], *ours[1]]))
-    lines = [f"`python bench/bench_demo.py --baseline {a.baseline} --repeat {a.repeat}`. Machine: {machine()}.",
+    lines = [f"`python bench/bench_demo.py --baseline {a.baseline} --repeat {a.repeat}`. Machine: {machine(head)}.",
              "",
              f"Both codes run `{SCENE}` into fresh folders, {a.repeat} time(s) each, alternating; the faster run "
              f"of each is shown (all walls: {base_sha} " + ", ".join(f"{x[0]:.1f}" for x in runs["base"])

@@ -390,11 +390,18 @@ def scaling(quick):
     print(f"PIV time ~ vectors^{p:.2f}")
 
 
-def machine():
+def head_commit():
     try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                              text=True).stdout.strip() or "unknown"
     except OSError:
-        commit = "unknown"
+        return "unknown"
+
+
+def machine(commit=None):
+    """The machine, the commit (give the one read when the run started: a commit made during
+    a long run must not relabel it), the time and the load average, as one line."""
+    commit = commit or head_commit()
     cpu = "unknown"
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -415,6 +422,7 @@ def main(argv=None):
     ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks.md"))
     ap.add_argument("--sections", default=SECTIONS, help="comma-separated subset to run")
     a = ap.parse_args(argv)
+    commit = head_commit()
     scale = a.scale or (0.3 if a.quick else 0.5)
     print("| stage | ours | baseline | baseline time | ratio | accuracy | notes |")
     print("|---|---|---|---|---|---|---|")
@@ -443,7 +451,7 @@ def main(argv=None):
         return
     name = "speed-quick" if a.quick else ("speed-full" if scale == 1 else f"speed-scale-{scale:g}")
     cmd = ("python bench/bench_speed.py" + (" --quick" if a.quick else "") + (f" --scale {a.scale:g}" if a.scale else ""))
-    body = (f"`{cmd}`" + (" (`make bench`)" if a.quick else "") + f". Machine: {machine()}.\n\n"
+    body = (f"`{cmd}`" + (" (`make bench`)" if a.quick else "") + f". Machine: {machine(commit)}.\n\n"
             "| stage | ours | baseline | baseline time | ratio | accuracy | notes |\n|---|---|---|---|---|---|---|\n"
             + "\n".join(ROWS) + "\n\nScaling (MART 10 iterations; PIV " + ("32-24-16" if a.quick else "64-48-32")
             + ", 75 % overlap):\n\n" + "\n".join(f"- {x}" for x in SCALING) + "\n")
