@@ -37,6 +37,13 @@ def test_quick_run_schema_and_ids(tmp_path):
     dih = res["curves"]["dz_over_d_theory_dih"]
     assert abs(dih["y"]["eq. 23, 532 nm"][-1] / (1.0 / 532e-6) - 1) < 1e-12 and dih["x"][-1] == 1.0
     assert set(res["curves"]["dz_over_d_theory_plenoptic"]["y"]) == {"eq. 22 printed", "eq. 22 paraxial"}
+    # DIH depth and sizing on the same fragments (Fig. 27 binned by diameter)
+    dih_row = rows["dih_depth_sd_over_mean_d_we784_tau5.1"]
+    assert dih_row["ours"] is not None and math.isfinite(dih_row["ours"]) and dih_row["ours"] > 0
+    assert "matched" in dih_row["note"]
+    fig27 = res["curves"]["dih_abs_dz_over_d_by_diameter"]
+    assert len(fig27["x"]) == len(fig27["y"]["DIH median |dz|/d"]) == 8
+    assert any(v is not None for v in fig27["y"]["DIH median |dz|/d"])
     assert (tmp_path / "report.md").is_file()
 
 
