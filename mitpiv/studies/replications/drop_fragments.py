@@ -480,9 +480,8 @@ def run(ctx) -> ReplicationResult:
                       "[27] via Sec. VI.A.2", 0.7, dih_sd_over_d, rel=0.5,
                       why="[27]: 'approximately 0.7', from velocity symmetry over many realisations; one crop here",
                       note=f"{skeleton}; against the truth: {dih['n_matched']} of {dih['n_truth_visible']} fragments "
-                           f"matched, median |dz| {dih['depth_median_abs_d'] or math.nan:.2f} d, RMS "
-                           f"{dih['depth_rms_d'] or math.nan:.2f} d, size bias "
-                           f"{1e3 * (dih['size_bias_mm'] if dih['size_bias_mm'] is not None else math.nan):+.0f} um; "
+                           f"matched, median |dz| {_num(dih['depth_median_abs_d']):.2f} d, RMS "
+                           f"{_num(dih['depth_rms_d']):.2f} d, size bias {1e3 * _num(dih['size_bias_mm']):+.0f} um; "
                            f"eq. 23 at {DIH_WAVELENGTH_NM:.0f} nm puts the depth resolution of a 0.1 mm droplet at "
                            f"{float(dih_depth_resolution(0.1, DIH_WAVELENGTH_NM)):.0f} mm"),
         compare_value("plenoptic_dz_theory_mm", "theoretical plenoptic depth resolution, eq. 22 as printed",
@@ -558,6 +557,11 @@ def run(ctx) -> ReplicationResult:
 def _nan(v):
     v = float(v)
     return v if math.isfinite(v) else None
+
+
+def _num(v):
+    """A cached JSON number back to a float (None, a non-finite value, is NaN)."""
+    return math.nan if v is None else float(v)
 
 
 STUDY = Study(
