@@ -8,7 +8,6 @@ Written by hand: a dozen lines of string handling that no Markdown library offer
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
@@ -47,14 +46,15 @@ def replace_block(text, name, body, heading=None):
 
 
 def update_file(path, name, body, heading=None):
-    """Replace NAME's block in the file at PATH (created when missing), written atomically."""
+    """Replace NAME's block in the file at PATH (created when missing), written atomically
+    (:func:`mitpiv.io.atomic.atomic_path`)."""
+    from mitpiv.io.atomic import atomic_path
+
     path = Path(path)
     old = path.read_text() if path.exists() else ""
     new = replace_block(old, name, body, heading)
-    tmp = path.with_name(f".{path.name}.tmp")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp.write_text(new)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        tmp.write_text(new)
 
 
 def table_rows(block):

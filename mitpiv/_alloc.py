@@ -12,10 +12,11 @@ reuses their pages: ``make demo`` 48.7 s -> 41.0 s (PIV 16.2 -> 10.9 s), peak RS
 
 The cost is that freed memory is not returned to the system until the process ends: fine
 for a run, a sweep worker or a benchmark, not wanted inside a user's long-lived process, so
-only the runner and the command line call :func:`retain_freed_memory`; library functions do
-not. A no-op (returns False) where the C library has no ``mallopt`` (not glibc).
+only the runner (every ``mitpiv run`` and sweep point) and each replication point call
+:func:`retain_freed_memory`; library functions do not. A no-op (returns False) where the C
+library is not glibc.
 
-Written by hand: three ``mallopt`` calls through ctypes; no kept library wraps them.
+Written by hand: two ``mallopt`` calls through ctypes; no kept library wraps them.
 """
 
 from __future__ import annotations
@@ -34,14 +35,13 @@ TRIM_THRESHOLD = 2**31 - 1
 def retain_freed_memory() -> bool:
     """Turn off glibc's mmap for large blocks and keep up to 2 GB of freed heap top: True
     when set (once per process), False where it cannot be (no glibc ``mallopt``)."""
-    name = ctypes.util.find_library("c")
     try:
-        libc = ctypes.CDLL(name)
-        mallopt = libc.mallopt
-        gnu = libc.gnu_get_libc_version  # glibc only: other C libraries' mallopt differ
-    except (OSError, AttributeError, TypeError):
+        libc = ctypes.CDLL(ctypes.util.find_library("c"))
+    except (OSError, TypeError):
         return False
-    del gnu
+    if not (hasattr(libc, "mallopt") and hasattr(libc, "gnu_get_libc_version")):
+        return False  # glibc only: other C libraries' mallopt options differ
+    mallopt = libc.mallopt
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt.restype = ctypes.c_int
     return bool(mallopt(M_MMAP_MAX, 0)) and bool(mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD))

@@ -101,3 +101,20 @@ def mlos_block(flat, shapes, rows, xs, ys, zs, exponent, *, dtype=np.float64):
     val = dr.exp(lg * dr.opaque(F, float(exponent)))
     dr.eval(val, seen)
     return val.numpy(), seen.numpy()
+
+
+def mlos_blocks(imgs, rows, grid, exponent, *, progress=None, desc="mlos: planes"):
+    """Yield ``(first plane, val, seen)`` for the blocks of planes of ``grid`` (at most
+    :data:`BLOCK_VOXELS` voxels each; :func:`mlos_block` on each), the progress counted in
+    planes. ``imgs``: the (h, w) images; ``rows``: their packed cameras."""
+    from mitpiv.progress import bar
+
+    flat = np.concatenate([np.asarray(im, np.float64).ravel() for im in imgs])
+    shapes = [im.shape for im in imgs]
+    step = max(1, BLOCK_VOXELS // (grid.shape[1] * grid.shape[2]))
+    with bar(grid.shape[0], desc=desc, progress=progress, unit="plane") as b:
+        for k0 in range(0, grid.shape[0], step):
+            zs = grid.z_mm[k0:k0 + step]
+            val, seen = mlos_block(flat, shapes, rows, grid.x_mm, grid.y_mm, zs, exponent)
+            yield k0, val, seen
+            b.update(len(zs))

@@ -46,7 +46,7 @@ from scipy import ndimage
 from mitpiv.errors import ConfigError, MitpivWarning
 from mitpiv.grid import VoxelGrid
 from mitpiv.physics.camera import PinholeCamera
-from mitpiv.progress import Progress, bar, track
+from mitpiv.progress import Progress, track
 from mitpiv.reconstruct._kernels import CIRCLE, GAUSSIAN, PIXEL_RADIUS, camera_row, kernels
 from mitpiv.reconstruct.mapping import CameraMapping, PinholeMapping, mapping_from_metadata
 
@@ -366,16 +366,10 @@ def mlos(images, mappings, grid: VoxelGrid, *, interpolation: str = "linear", ex
 
     rows = _pinhole_rows(maps) if interpolation == "linear" else None
     if rows is not None and _drjit.available():
-        flat = np.concatenate([np.asarray(im, np.float64).ravel() for im in imgs])
-        nyx = grid.shape[1] * grid.shape[2]
-        step = max(1, _drjit.BLOCK_VOXELS // nyx)
         out = np.empty(grid.shape, np.float32)
-        with bar(grid.shape[0], desc="mlos: planes", progress=progress, unit="plane") as b:
-            for k0 in range(0, grid.shape[0], step):
-                val, _ = _drjit.mlos_block(flat, [im.shape for im in imgs], rows, grid.x_mm, grid.y_mm,
-                                           grid.z_mm[k0:k0 + step], e)
-                out[k0:k0 + step] = val.reshape(-1, *grid.shape[1:])
-                b.update(len(grid.z_mm[k0:k0 + step]))
+        for k0, val, _ in _drjit.mlos_blocks(imgs, rows, grid, e, progress=progress, desc="mlos: planes"):
+            block = val.reshape(-1, *grid.shape[1:])
+            out[k0:k0 + len(block)] = block
         return out
     return _volume_by_planes(imgs, maps, grid, interpolation, "multiplicative", e, progress=progress, what="mlos")
 
@@ -592,24 +586,20 @@ def _candidates_pinhole(imgs, rows, grid, prune, progress, what, engine=None):
     from mitpiv.reconstruct import _drjit
 
     engine = engine or ("drjit" if _drjit.available() else "numba")
-    flat = np.concatenate([np.asarray(im, np.float64).ravel() for im in imgs])
     nyx = grid.shape[1] * grid.shape[2]
-    xs, ys, zs = grid.x_mm, grid.y_mm, grid.z_mm
     idx, init = [], []
     if engine == "drjit":
-        step = max(1, _drjit.BLOCK_VOXELS // nyx)
-        shapes = [im.shape for im in imgs]
-        with bar(grid.shape[0], desc=f"{what}: MLOS planes", progress=progress, unit="plane") as b:
-            for k0 in range(0, grid.shape[0], step):
-                val, seen = _drjit.mlos_block(flat, shapes, rows, xs, ys, zs[k0:k0 + step], 1.0 / len(imgs))
-                sel = np.flatnonzero(val > 0 if prune else seen)
-                # no copies where none are needed: fresh 100 MB arrays cost ~0.4 s of page faults here
-                init.append(val if len(sel) == len(val) else val[sel])
-                sel += k0 * nyx
-                idx.append(sel)
-                b.update(len(zs[k0:k0 + step]))
+        for k0, val, seen in _drjit.mlos_blocks(imgs, rows, grid, 1.0 / len(imgs), progress=progress,
+                                                desc=f"{what}: MLOS planes"):
+            sel = np.flatnonzero(val > 0 if prune else seen)
+            # no copies where none are needed: fresh 100 MB arrays cost ~0.4 s of page faults here
+            init.append(val if len(sel) == len(val) else val[sel])
+            sel += k0 * nyx
+            idx.append(sel)
         return (idx[0], init[0]) if len(idx) == 1 else (np.concatenate(idx), np.concatenate(init))
     k = kernels()
+    flat = np.concatenate([np.asarray(im, np.float64).ravel() for im in imgs])
+    xs, ys, zs = grid.x_mm, grid.y_mm, grid.z_mm
     offs = np.concatenate([[0], np.cumsum([im.size for im in imgs])[:-1]]).astype(np.int64)
     hs = np.array([im.shape[0] for im in imgs], np.int64)
     ws = np.array([im.shape[1] for im in imgs], np.int64)
