@@ -47,7 +47,8 @@ from mitpiv.errors import ConfigError
 
 __all__ = ["PAPER_DOT_CARD", "StackDewarp", "fit_stack_dewarp", "dot_card_points", "dot_card_observations",
            "locate_dots_in_stack",
-           "paper_alphas", "PAPER_ALPHA_RANGES", "model_error", "z_uncertainty", "power_law_fit",
+           "paper_alphas", "PAPER_ALPHA_RANGES", "model_error", "z_uncertainty",
+           "z_uncertainty_quadrature", "power_law_fit",
            "dih_depth_resolution", "plenoptic_depth_resolution", "DEPTH_RESOLUTION_FORMS"]
 
 #: The paper's dot card and traverse (ch. V.A): 1 mm dots at 3 mm pitch, 25 depths every
@@ -305,6 +306,16 @@ def z_uncertainty(sd_x_mm, sd_z_mm):
     the x one ("assuming negligible uncertainty in the x direction"): ``sd_z - sd_x``
     (Table 2's every row, e.g. 0.411 - 0.263 = 0.148 mm at We 784, 320 ms)."""
     return np.asarray(sd_z_mm, dtype=np.float64) - np.asarray(sd_x_mm, dtype=np.float64)
+
+
+def z_uncertainty_quadrature(sd_x_mm, sd_z_mm):
+    """The z uncertainty if the flow's scatter and the depth error are independent and add
+    in quadrature: ``sqrt(sd_z^2 - sd_x^2)`` (0 where ``sd_z <= sd_x``). The paper's
+    :func:`z_uncertainty` subtracts the standard deviations linearly, which understates an
+    independent error (0.316 against 0.148 mm for Table 2's 0.263 and 0.411 mm)."""
+    x = np.asarray(sd_x_mm, dtype=np.float64)
+    z = np.asarray(sd_z_mm, dtype=np.float64)
+    return np.sqrt(np.maximum(z**2 - x**2, 0.0))
 
 
 def power_law_fit(tau, ratio) -> tuple[float, float]:

@@ -118,7 +118,8 @@ FRAGMENT_LAW: dict[int, dict] = {we: {"q": 0.199 / 3.30, "n": 0.0, "source": "pl
 
 def fragment_field(we: float, tau: float, *, d0_mm: float, v0_m_s: float, n_fragments: int = 196,
                    q: float | None = None, n: float | None = None, sigma_ln: float = 0.5, tau_start: float = 1.0,
-                   elevation_deg=(20.0, 60.0), film_mm: float = FILM_MM, d_min_mm: float = 0.0, seed: int = 0) -> dict:
+                   elevation_deg=(20.0, 60.0), film_mm: float = FILM_MM, d_min_mm: float = 0.0,
+                   velocity_sd_mm_s: float = 0.0, seed: int = 0) -> dict:
     """Secondary fragments of one drop impact at time ``tau`` (see the module notes).
 
     Parameters
@@ -142,6 +143,14 @@ def fragment_field(we: float, tau: float, *, d0_mm: float, v0_m_s: float, n_frag
         Range of the ejection angle above the film (uniform).
     d_min_mm : float
         Fragments below this diameter are dropped.
+    velocity_sd_mm_s : float
+        Standard deviation [mm/s] of a Gaussian velocity perturbation of each fragment in
+        the film plane (x and z, independently; isotropic there, as the flow's symmetry
+        wants), carried since detachment: the fragment sits ``dv (t - t_e)`` off the
+        crown-model path. Real fragments scatter about the mean radial law (the seed paper's
+        x model error, Fig. 25 and Table 2, is this scatter if x is measured without error).
+        The vertical component is left alone, so no fragment flies into the film. 0 keeps
+        the deterministic crown model.
     seed : int
 
     Returns
@@ -160,6 +169,9 @@ def fragment_field(we: float, tau: float, *, d0_mm: float, v0_m_s: float, n_frag
     lo_e, hi_e = (float(v) for v in elevation_deg)
     if not 0.0 <= lo_e <= hi_e < 90.0:
         raise ConfigError(f"fragment_field: elevation_deg must be (lo, hi) with 0 <= lo <= hi < 90, got {elevation_deg!r}.")
+    velocity_sd_mm_s = float(velocity_sd_mm_s)
+    if not (math.isfinite(velocity_sd_mm_s) and velocity_sd_mm_s >= 0.0):
+        raise ConfigError(f"fragment_field: velocity_sd_mm_s must be a finite speed >= 0 [mm/s], got {velocity_sd_mm_s!r}.")
     if q is None or n is None:
         row = FRAGMENT_LAW[min(FRAGMENT_LAW, key=lambda w: abs(w - we))]
         q = row["q"] if q is None else q
@@ -181,6 +193,11 @@ def fragment_field(we: float, tau: float, *, d0_mm: float, v0_m_s: float, n_frag
     d = mean_d * np.exp(sigma_ln * rng.standard_normal(m) - 0.5 * sigma_ln**2)
     pos = np.column_stack([r * np.cos(phi), h, r * np.sin(phi)])
     vel = np.column_stack([vr * np.cos(phi), vy, vr * np.sin(phi)])
+    if velocity_sd_mm_s > 0.0:  # drawn after the rest: the deterministic part keeps its stream
+        dv = np.zeros((m, 3))
+        dv[:, [0, 2]] = velocity_sd_mm_s * rng.standard_normal((m, 2))
+        vel = vel + dv
+        pos = pos + dv * dt_s[:, None]
     keep = d >= d_min_mm
     return {"positions_mm": pos[keep], "diameters_mm": d[keep], "velocities_mm_s": vel[keep], "tau_e": tau_e[keep],
             "we": float(we), "tau": tau, "t_s": float(time_of(tau, d0_mm, v0_m_s))}

@@ -1,5 +1,5 @@
-"""The plenoptic vs DIH drop-fragment replication (skeleton): its quick run (schema,
-required ids, sane values against the simulated truth). The paper's equations are tested
+"""The plenoptic vs DIH drop-fragment replication: its quick run (schema, required ids,
+sane values against the simulated truth, the figures). The paper's equations are tested
 in tests/analysis/test_drop_fragments.py and tests/physics/test_drop_impact.py."""
 
 import math
@@ -31,6 +31,18 @@ def test_quick_run_schema_and_ids(tmp_path):
         assert rows[k]["ours"] is None or (math.isfinite(rows[k]["ours"]) and rows[k]["ours"] >= 0)
     c = res["curves"]["mean_d_over_d0_we784"]
     assert c["x"] == [2.6, 5.1, 7.7] and len(c["y"]["plenoptic"]) == 3
+    # the model's rim speed decays as tau^-1/2 and the measured radial velocity follows (Fig. 28 right)
+    vr = res["curves"]["vr_over_v0_we784"]["y"]
+    assert vr["truth in view"][0] > vr["truth in view"][2]
+    assert rows["vr_n_we784"]["ours"] is not None
+    # the paper's z uncertainty (linear difference) and the quadrature reading share their inputs
+    zl, zq = rows["z_uncertainty_mm_we784_tau5.1"]["ours"], rows["z_uncertainty_quadrature_mm_we784_tau5.1"]["ours"]
+    sx, sz = rows["model_err_x_mm_we784_tau5.1"]["ours"], rows["model_err_z_mm_we784_tau5.1"]["ours"]
+    assert math.isclose(zl, sz - sx, rel_tol=1e-12, abs_tol=1e-12)
+    assert math.isclose(zq, math.sqrt(max(sz**2 - sx**2, 0.0)), rel_tol=1e-12, abs_tol=1e-12)
+    # against the truth: the plenoptic displacement errors exist and are below a millimetre
+    assert 0 < rows["plen_true_dz_disp_sd_mm_we784_tau5.1"]["ours"] < 1.0
+    assert 0 <= rows["plen_true_dx_disp_sd_mm_we784_tau5.1"]["ours"] < 1.0
     # eq. 22 at the paper's camera (printed form; the finding is in the row's note) and the
     # theoretical curves of Figs. 26-27 (eq. 23 at 532 nm: dz/d = d/lambda, 1880 at d = 1 mm)
     assert abs(rows["plenoptic_dz_theory_mm"]["ours"] - 0.468) < 1e-3 and rows["plenoptic_dz_theory_mm"]["agrees"] is False
@@ -45,6 +57,11 @@ def test_quick_run_schema_and_ids(tmp_path):
     assert len(fig27["x"]) == len(fig27["y"]["DIH median |dz|/d"]) == 8
     assert any(v is not None for v in fig27["y"]["DIH median |dz|/d"])
     assert (tmp_path / "report.md").is_file()
+    figs = {"fig24_size_histogram.png", "fig25_displacements.png", "fig26-27_depth_uncertainty.png",
+            "fig28-29_vs_tau.png"}
+    report = (tmp_path / "report.md").read_text()
+    assert all((tmp_path / f).stat().st_size > 10_000 and f"]({f})" in report for f in figs)
+    assert "plenoptic_abs_dz_over_d_by_diameter" in res["curves"]
 
 
 # Rendered dot cards through the ideal lens: the dots' stack locations in nominal

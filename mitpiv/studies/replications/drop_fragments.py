@@ -2,9 +2,10 @@
 fragments and shotgun pellets (seed paper 003, chapters IV-VI):
 ``mitpiv replicate drop-fragments [--quick]``.
 
-SKELETON (first session of issue 25): every required row id is produced by the code path
-that will make it at full scale, on a crop of the sensor and a thin focal stack; several
-parts of the paper's set-up are not in yet (see the report's "Not yet replicated" section).
+Every row is produced by the same code at both scales: the full scale runs the paper's nine
+conditions and 1000-plane stacks on a crop of the sensor, several realisations each; the
+quick scale a smaller crop, a thin stack and three conditions. What is not replicated is
+listed in the report's "Not yet replicated" section.
 
 Orchestration only. The camera: :func:`mitpiv.physics.plenoptic.paper_003_camera` (with a
 radial main-lens distortion); the fragments: :mod:`mitpiv.physics.drop_impact`; rendering:
@@ -57,12 +58,12 @@ def _scale(quick: bool) -> dict:
     from mitpiv.analysis.drop_fragments import PAPER_ALPHA_RANGES, PAPER_DOT_CARD
 
     if quick:
-        return {"conditions": [(784, 2.6), (784, 5.1), (784, 7.7)], "crop_px": (420, 308), "planes": 41, "alpha_range": (0.9672, 1.0384), "spp": 4,
+        return {"conditions": [(784, 2.6), (784, 5.1), (784, 7.7)], "realisations": 4, "crop_px": (420, 308), "planes": 41, "alpha_range": (0.9672, 1.0384), "spp": 4,
                 "aim_mm": (5.0, 1.5), "n_fragments": 196, "dih_px": (192, 192), "dih_planes": 25,
                 "card": {"card_pitch_mm": 0.5, "card_dot_mm": 0.2, "card_half_range_mm": 1.5, "card_planes": 21,
                          "card_depths_mm": [d for d in PAPER_DOT_CARD["depths_mm"] if abs(d) <= 10.0]},
                 "pellets": 6, "pellet_crop_px": (720, 720), "pellet_planes": 41, "pellet_alpha_range": (0.9609, 1.0606)}
-    return {"conditions": sorted(PAPER_TABLE_2), "crop_px": (1320, 880), "planes": 1000, "alpha_range": PAPER_ALPHA_RANGES["drop_impact"], "spp": 16,
+    return {"conditions": sorted(PAPER_TABLE_2), "realisations": 8, "crop_px": (1320, 880), "planes": 1000, "alpha_range": PAPER_ALPHA_RANGES["drop_impact"], "spp": 16,
             "aim_mm": (5.0, 2.0), "n_fragments": 196, "dih_px": (1024, 1024), "dih_planes": 201,
             "card": {"card_pitch_mm": 3.0, "card_dot_mm": 1.0, "card_half_range_mm": 2.5, "card_planes": 51,
                      "card_depths_mm": list(PAPER_DOT_CARD["depths_mm"])},
@@ -210,7 +211,7 @@ def calibration_point(item: dict) -> dict:
     cam, sensor = _camera_and_sensor(item)
     obs = render_dot_card_observations(sensor, cam, depths_mm=item["card_depths_mm"], pitch_mm=item["card_pitch_mm"],
                                        dot_mm=item["card_dot_mm"], half_range_mm=item["card_half_range_mm"],
-                                       planes=item["card_planes"], spp=item["spp"], seed=item["seed"] * 11 + 5)
+                                       planes=item["card_planes"], spp=item["spp"], seed=_seed(item, "dot card", bits=32))
     dw = fit_stack_dewarp(obs["uva"], obs["xyz"], degree=2)
     after = dw(obs["uva"]) - obs["xyz"]
     return {"coef": dw.coef.tolist(), "degree": dw.degree, "centre": dw.centre.tolist(), "scale": dw.scale.tolist(),
@@ -220,47 +221,85 @@ def calibration_point(item: dict) -> dict:
             "post_mean_abs_z_err_mm": float(np.mean(np.abs(after[:, 2])))}
 
 
-def plenoptic_point(item: dict) -> dict:
-    """One drop impact (We, tau, seed) seen by the cropped plenoptic camera: two frames
-    150 us apart rendered, decoded, refocused, detected, dewarped and matched."""
-    from mitpiv.analysis.backlit import match_frames
-    from mitpiv.analysis.drop_fragments import StackDewarp
-    from mitpiv.lightfield import decode
+def _seed(item: dict, purpose: str, k: int = 0, *, bits: int = 64) -> int:
+    """The seed of stream ``purpose`` (frame ``k``) of one realisation of one condition:
+    independent streams (:func:`mitpiv.streams.derived_seed`) per (We, tau, realisation),
+    or per pellet realisation; 31-bit for Mitsuba (``bits=32``, so that ``seed + k`` stays
+    a valid 32-bit seed)."""
+    from mitpiv.streams import derived_seed
+
+    tag = (f"we{item['we']}_tau{item['tau']}" if "we" in item else "pellets") + f"_r{item.get('realisation', 0)}"
+    v = derived_seed(item["seed"], f"drop-fragments {purpose}", tag, int(k), bits=bits)
+    return v >> 1 if bits == 32 else v
+
+
+def _fragments(item: dict) -> dict:
+    """The fragment field of one realisation (the same for the plenoptic and the DIH arm)."""
     from mitpiv.physics.drop_impact import condition, fragment_field
-    from mitpiv.render.backlit import render_backlit
 
     row = condition(item["we"])
-    f = fragment_field(item["we"], item["tau"], d0_mm=row.d0_mm, v0_m_s=row.v0_m_s, n_fragments=item["n_fragments"],
-                       seed=item["seed"])
+    return fragment_field(item["we"], item["tau"], d0_mm=row.d0_mm, v0_m_s=row.v0_m_s,
+                          n_fragments=item["n_fragments"], velocity_sd_mm_s=item["velocity_sd_mm_s"],
+                          seed=_seed(item, "fragments"))
+
+
+def plenoptic_point(item: dict) -> dict:
+    """One drop impact (We, tau, realisation) seen by the cropped plenoptic camera: two
+    frames 150 us apart rendered, decoded, refocused, detected, dewarped and matched; and
+    the detections against the truth (what the paper could not do): each matched
+    fragment's depth error, and each matched pair's displacement error."""
+    from mitpiv.analysis.backlit import evaluate_detections, match_frames
+    from mitpiv.analysis.drop_fragments import StackDewarp
+    from mitpiv.lightfield import decode
+    from mitpiv.render.backlit import render_backlit
+
+    f = _fragments(item)
     p0, d, v = f["positions_mm"], f["diameters_mm"], f["velocities_mm_s"]
     p1 = p0 + v * DT_DROP_S
     cam, sensor = _camera_and_sensor(item)
     kw = {"spp": item["spp"], "backlight_mm": 40.0, "backlight_size_mm": 200.0}
-    white = render_backlit(sensor, np.zeros((0, 3)), [], seed=item["seed"] * 7 + 1, **kw)
-    raws = [render_backlit(sensor, p, d, seed=item["seed"] * 7 + 2 + k, **kw) for k, p in enumerate((p0, p1))]
+    white = render_backlit(sensor, np.zeros((0, 3)), [], seed=_seed(item, "white", bits=32), **kw)
+    raws = [render_backlit(sensor, p, d, seed=_seed(item, "frame", k, bits=32), **kw) for k, p in enumerate((p0, p1))]
     z = _stack_depths(cam, item["alpha_range"], item["planes"])
     tmp = Path(tempfile.mkdtemp(prefix="mitpiv_df_"))
-    lf_w = decode(white, optics=cam, white=white, spatial_oversample=SUPERSAMPLE)
-    bg = _stack(lf_w, z, tmp)
-    c = item["dewarp"]
-    dewarp = StackDewarp(np.asarray(c["coef"]), int(c["degree"]), np.asarray(c["centre"]), np.asarray(c["scale"]),
-                         np.asarray(c["rms_mm"]))
-    dets = []
-    for raw in raws:
-        lf = decode(raw, optics=cam, white=white, spatial_oversample=SUPERSAMPLE)
-        dets.append(_detect_world(cam, lf, _stack(lf, z, tmp), z, bg, dewarp))
-    shutil.rmtree(tmp, ignore_errors=True)
-    # truth inside the crop's view (for the counts)
-    vis = cam.visible(p0)
-    out = {"n_truth_visible": int(vis.sum()), "n_found": len(dets[0]), "truth_mean_d_mm": float(d[vis].mean()) if vis.any() else math.nan,
-           }
-    if len(dets[0]) == 0 or len(dets[1]) == 0:
-        return {**out, "positions_mm": [], "displacements_mm": [], "diameters_mm": []}
+    try:
+        lf_w = decode(white, optics=cam, white=white, spatial_oversample=SUPERSAMPLE)
+        bg = _stack(lf_w, z, tmp)
+        c = item["dewarp"]
+        dewarp = StackDewarp(np.asarray(c["coef"]), int(c["degree"]), np.asarray(c["centre"]), np.asarray(c["scale"]),
+                             np.asarray(c["rms_mm"]))
+        dets = []
+        for raw in raws:
+            lf = decode(raw, optics=cam, white=white, spatial_oversample=SUPERSAMPLE)
+            dets.append(_detect_world(cam, lf, _stack(lf, z, tmp), z, bg, dewarp))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    vis = cam.visible(p0)  # truth inside the crop's view (for the counts)
+    rad = np.hypot(p0[vis, 0], p0[vis, 2])
+    vr_true = (v[vis, 0] * p0[vis, 0] + v[vis, 2] * p0[vis, 2]) / np.maximum(rad, 1e-12)
+    out = {"n_truth_visible": int(vis.sum()), "n_found": len(dets[0]), "truth_vr_mm_s": vr_true.tolist(),
+           "truth_mean_d_mm": float(d[vis].mean()) if vis.any() else math.nan,
+           "truth_d_visible_mm": d[vis].tolist(), "diameters_mm": (dets[0].diameters_mm.tolist() if len(dets[0]) else []),
+           "positions_mm": [], "displacements_mm": [], "pair_diameters_mm": [],
+           "matched_truth_d_mm": [], "depth_error_mm": [], "disp_error_mm": [], "disp_truth_d_mm": []}
+    if len(dets[0]) == 0:
+        return out
+    ev = evaluate_detections(dets[0], p0[vis], d[vis], axis=(0.0, 0.0, 1.0))
+    d_vis, disp_vis = d[vis], (p1 - p0)[vis]
+    truth_of = np.full(len(dets[0]), -1)
+    truth_of[ev["pairs"][:, 0]] = ev["pairs"][:, 1]
+    out.update(matched_truth_d_mm=d_vis[ev["pairs"][:, 1]].tolist(),
+               depth_error_mm=(ev["depth_error_diameters"] * d_vis[ev["pairs"][:, 1]]).tolist())
+    if len(dets[1]) == 0:
+        return out
     tr = match_frames(dets[0], dets[1], dt_s=DT_DROP_S, radius_mm=0.6)
-    pa = dets[0].positions_mm[tr["pairs"][:, 0]]
     disp = tr["velocity_mm_s"] * DT_DROP_S
-    return {**out, "positions_mm": pa.tolist(), "displacements_mm": disp.tolist(),
-            "diameters_mm": dets[0].diameters_mm.tolist()}
+    t = truth_of[tr["pairs"][:, 0]]
+    ok = t >= 0
+    out.update(positions_mm=dets[0].positions_mm[tr["pairs"][:, 0]].tolist(), displacements_mm=disp.tolist(),
+               pair_diameters_mm=dets[0].diameters_mm[tr["pairs"][:, 0]].tolist(),
+               disp_error_mm=(disp[ok] - disp_vis[t[ok]]).tolist(), disp_truth_d_mm=d_vis[t[ok]].tolist())
+    return out
 
 
 def dih_point(item: dict) -> dict:
@@ -269,11 +308,8 @@ def dih_point(item: dict) -> dict:
     plane normal to the beam, :func:`~mitpiv.analysis.backlit.evaluate_detections`)."""
     from mitpiv import holography
     from mitpiv.analysis.backlit import evaluate_detections
-    from mitpiv.physics.drop_impact import condition, fragment_field
 
-    row = condition(item["we"])
-    f = fragment_field(item["we"], item["tau"], d0_mm=row.d0_mm, v0_m_s=row.v0_m_s, n_fragments=item["n_fragments"],
-                       seed=item["seed"])
+    f = _fragments(item)
     w, h = item["dih_px"]
     centre = tuple(float(c) for c in item["aim_mm"])
     sensor_z = 30.0  # the hologram plane 30 mm beyond the impact axis (the paper does not state it)
@@ -281,7 +317,7 @@ def dih_point(item: dict) -> dict:
     near = np.all(np.abs(f["positions_mm"][:, :2] - centre) < half + 1.0, axis=1)  # the crop and its guard band
     holo = holography.record({"positions_mm": f["positions_mm"][near], "diameters_mm": f["diameters_mm"][near]},
                              sensor_z_mm=sensor_z, wavelength_nm=DIH_WAVELENGTH_NM, pixel_um=DIH_PIXEL_UM,
-                             resolution=(w, h), centre_xy_mm=centre, guard_mm=1.0, seed=item["seed"])
+                             resolution=(w, h), centre_xy_mm=centre, guard_mm=1.0, seed=_seed(item, "hologram"))
     z = np.linspace(sensor_z - 12.0, sensor_z + 12.0, item["dih_planes"])
     det = holography.detect(holo, z)
     inside = np.all(np.abs(f["positions_mm"][:, :2] - centre) < half, axis=1)
@@ -291,7 +327,8 @@ def dih_point(item: dict) -> dict:
     return {"n_found": len(det), "n_truth_visible": int(inside.sum()), "n_matched": ev["n_matched"],
             "depth_median_abs_d": _nan(ev["depth_median_abs_diameters"]), "depth_rms_d": _nan(ev["depth_rms_diameters"]),
             "size_bias_mm": _nan(ev["size_bias_mm"]), "size_rms_mm": _nan(ev["size_rms_mm"]),
-            "matched_d_mm": d_true.tolist(), "depth_error_d": ev["depth_error_diameters"].tolist()}
+            "matched_d_mm": d_true.tolist(), "depth_error_d": ev["depth_error_diameters"].tolist(),
+            "size_error_mm": ev["size_error_mm"].tolist()}
 
 
 def pellet_point(item: dict) -> dict:
@@ -312,17 +349,17 @@ def pellet_point(item: dict) -> dict:
     f = pellet_field(item["n"], diameter_mm=2.0, box_mm=((-half[0] + 3.5, half[0] - 1.5), (-half[1] + 1.5, half[1] - 1.5),
                                                          (-60.0, 60.0)),
                      velocity_mm_s=(-PELLET_SPEED_M_S * 1e3, 0.0, 0.0), min_gap_mm=1.0, view_axis=(0, 0, 1),
-                     seed=item["seed"])
+                     seed=_seed(item, "pellets"))
     p0, d = f["positions_mm"], f["diameters_mm"]
     p1 = p0 + f["velocities_mm_s"] * DT_PELLET_S
     kw = {"spp": item["spp"], "backlight_mm": 250.0, "backlight_size_mm": 600.0}
-    white = render_backlit(sensor, np.zeros((0, 3)), [], seed=item["seed"] * 5 + 1, **kw)
+    white = render_backlit(sensor, np.zeros((0, 3)), [], seed=_seed(item, "white", bits=32), **kw)
     z = _stack_depths(cam, item["alpha_range"], item["planes"])
     tmp = Path(tempfile.mkdtemp(prefix="mitpiv_df_"))
     bg = _stack(decode(white, optics=cam, white=white, spatial_oversample=SUPERSAMPLE), z, tmp)
     dets = []
     for k, p in enumerate((p0, p1)):
-        lf = decode(render_backlit(sensor, p, d, seed=item["seed"] * 5 + 2 + k, **kw), optics=cam, white=white,
+        lf = decode(render_backlit(sensor, p, d, seed=_seed(item, "frame", k, bits=32), **kw), optics=cam, white=white,
                     spatial_oversample=SUPERSAMPLE)
         dets.append(_detect_world(cam, lf, _stack(lf, z, tmp), z, bg, None))  # no dot card for the pellets (ch. V.A)
     shutil.rmtree(tmp, ignore_errors=True)
@@ -364,65 +401,130 @@ def dih_shock_point(item: dict) -> dict:
             "pellets_in_crop": int(near.sum()), "mach": mach, "mach_angle_deg": math.degrees(mu)}
 
 
+def _pool(results: list[dict], key: str, width: int = 0) -> np.ndarray:
+    """One list field of several realisations' results, concatenated (``width`` columns)."""
+    parts = [np.asarray(r[key], dtype=np.float64).reshape((-1, width) if width else (-1,)) for r in results]
+    return np.concatenate(parts) if parts else np.zeros((0, width) if width else (0,))
+
+
+def _condition_stats(results: list[dict], we: int) -> dict:
+    """Pooled statistics of one condition's realisations (the paper pools its 250 image
+    pairs): the model error (Fig. 25), the mean measured diameter (Fig. 24/28), the
+    velocities (Figs. 28-29) and, against the truth, the depth and displacement errors."""
+    from mitpiv.analysis.drop_fragments import model_error, z_uncertainty, z_uncertainty_quadrature
+    from mitpiv.physics.drop_impact import condition
+
+    v0 = condition(we).v0_m_s * 1e3
+    p, disp = _pool(results, "positions_mm", 3), _pool(results, "displacements_mm", 3)
+    me = model_error(p, disp) if len(p) >= 3 else None
+    sx = me["x"]["sd_mm"] if me else math.nan
+    sz = me["z"]["sd_mm"] if me else math.nan
+    d = _pool(results, "diameters_mm")
+    e = _pool(results, "disp_error_mm", 3)
+    vel = disp / DT_DROP_S
+    rad = np.hypot(p[:, 0], p[:, 2])
+    ok = rad > 0
+    vr = (vel[ok, 0] * p[ok, 0] + vel[ok, 2] * p[ok, 2]) / rad[ok]
+    n = np.asarray([r["n_found"] for r in results], dtype=np.float64)
+    mean = (lambda a: float(np.mean(a)) if np.size(a) else math.nan)  # noqa: E731
+    sd = (lambda a: float(np.std(a, ddof=1)) if np.size(a) >= 3 else math.nan)  # noqa: E731
+    return {"d0": condition(we).d0_mm, "sx": sx, "sz": sz, "z_unc": float(z_uncertainty(sx, sz)), "z_unc_q": float(z_uncertainty_quadrature(sx, sz)),
+            "mean_d": mean(d), "sd_d": sd(d), "n_found_mean": mean(n), "n_found_sd": sd(n),
+            "n_visible_mean": mean([r["n_truth_visible"] for r in results]), "n_pairs": int(len(p)),
+            "truth_sd_dx": sd(e[:, 0]), "truth_sd_dz": sd(e[:, 2]), "n_truth_pairs": int(len(e)),
+            "vr_over_v0": mean(vr) / v0, "vr_sd_over_v0": sd(vr) / v0,
+            "truth_vr_over_v0": mean(_pool(results, "truth_vr_mm_s")) / v0,
+            "abs_vx_over_v0": mean(np.abs(vel[:, 0])) / v0, "abs_vz_over_v0": mean(np.abs(vel[:, 2])) / v0,
+            "me": me, "p": p, "disp": disp, "d": d, "depth_error_mm": _pool(results, "depth_error_mm"),
+            "matched_truth_d_mm": _pool(results, "matched_truth_d_mm"), "truth_d_mm": _pool(results, "truth_d_visible_mm")}
+
+
+def _fit_or_nan(taus, values) -> tuple[float, float]:
+    from mitpiv.analysis.drop_fragments import power_law_fit
+
+    t, v = np.asarray(taus, dtype=np.float64), np.asarray(values, dtype=np.float64)
+    good = np.isfinite(v) & (v > 0)
+    return power_law_fit(t[good], v[good]) if np.unique(t[good]).size >= 2 else (math.nan, math.nan)
+
+
+def _binned_abs(d_mm, err_over_d, edges) -> list:
+    """Median |error|/d of the fragments in each diameter bin (None where a bin is empty)."""
+    d, e = np.asarray(d_mm), np.abs(np.asarray(err_over_d))
+    return [_nan(np.median(e[(d >= a) & (d < b)])) if np.any((d >= a) & (d < b)) else None
+            for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+
 def run(ctx) -> ReplicationResult:
     from mitpiv.analysis.drop_fragments import (
         DEPTH_RESOLUTION_FORMS,
         dih_depth_resolution,
-        model_error,
         plenoptic_depth_resolution,
-        power_law_fit,
-        z_uncertainty,
     )
-    from mitpiv.physics.drop_impact import condition
+    from mitpiv.physics.drop_impact import FRAGMENT_LAW, condition
     from mitpiv.physics.plenoptic import paper_003_camera
 
     sc = _scale(ctx.quick)
-    items = [{"we": we, "tau": tau, "seed": ctx.seed, "crop_px": list(sc["crop_px"]), "planes": sc["planes"],
-              "alpha_range": list(sc["alpha_range"]), "spp": sc["spp"], "aim_mm": list(sc["aim_mm"]),
-              "n_fragments": sc["n_fragments"], "k1": K1_MAIN_LENS} for we, tau in sc["conditions"]]
+    reals = int(sc["realisations"])
+    items = [{"we": we, "tau": tau, "seed": ctx.seed, "realisation": r, "crop_px": list(sc["crop_px"]),
+              "planes": sc["planes"], "alpha_range": list(sc["alpha_range"]), "spp": sc["spp"],
+              "aim_mm": list(sc["aim_mm"]), "n_fragments": sc["n_fragments"], "k1": K1_MAIN_LENS,
+              "velocity_sd_mm_s": PAPER_TABLE_2[(we, tau)][0] / DT_DROP_S}
+             for we, tau in sc["conditions"] for r in range(reals)]
 
     def key(it):
-        return (f"plen_we{it['we']}_tau{it['tau']}_s{it['seed']}_crop{it['crop_px'][0]}x{it['crop_px'][1]}"
-                f"_pl{it['planes']}_a{it['alpha_range'][0]}_{it['alpha_range'][1]}_spp{it['spp']}_k1{it['k1']}"
-                f"_aim{it['aim_mm'][0]}_{it['aim_mm'][1]}_n{it['n_fragments']}")
+        return (f"plen3_we{it['we']}_tau{it['tau']}_r{it['realisation']}_s{it['seed']}_crop{it['crop_px'][0]}x"
+                f"{it['crop_px'][1]}_pl{it['planes']}_a{it['alpha_range'][0]}_{it['alpha_range'][1]}_spp{it['spp']}"
+                f"_k1{it['k1']}_aim{it['aim_mm'][0]}_{it['aim_mm'][1]}_n{it['n_fragments']}_vsd{it['velocity_sd_mm_s']:.0f}")
 
-    cal_item = {**items[0], **sc["card"]}
-    cal = ctx.cached(f"dewarp_{key(cal_item)}_card{cal_item['card_pitch_mm']}_{cal_item['card_dot_mm']}"
-                     f"_{len(cal_item['card_depths_mm'])}d_{cal_item['card_planes']}pl", lambda: calibration_point(cal_item))
-    items = [{**it, "dewarp": {k: cal[k] for k in ("coef", "degree", "centre", "scale", "rms_mm")}} for it in items]
     card = sc["card"]
-    plen = ctx.map(plenoptic_point, items,
-                   key=lambda it: f"{key(it)}_card{card['card_pitch_mm']}_{len(card['card_depths_mm'])}d")
-    dih_items = [{**it, "dih_px": list(sc["dih_px"]), "dih_planes": sc["dih_planes"]} for it in items if it["tau"] == 5.1]
-    dih = ctx.map(dih_point, dih_items, key=lambda it: f"dih2_{key(it)}_px{it['dih_px'][0]}_pl{it['dih_planes']}")[0]
+    cal_item = {**items[0], **card}
+    cal = ctx.cached(f"dewarp2_{key(cal_item)}_card{card['card_pitch_mm']}_{card['card_dot_mm']}"
+                     f"_{len(card['card_depths_mm'])}d_{card['card_planes']}pl", lambda: calibration_point(cal_item))
+    items = [{**it, "dewarp": {k: cal[k] for k in ("coef", "degree", "centre", "scale", "rms_mm")}} for it in items]
+    plen = ctx.map(plenoptic_point, items, key=lambda it: f"{key(it)}_card{card['card_pitch_mm']}_{len(card['card_depths_mm'])}d",
+                   desc="plenoptic realisations")
+    dih_items = [{**it, "dih_px": list(sc["dih_px"]), "dih_planes": sc["dih_planes"]}
+                 for it in items if (it["we"], it["tau"]) == (784, 5.1)]
+    dih = ctx.map(dih_point, dih_items, key=lambda it: f"dih3_{key(it)}_px{it['dih_px'][0]}_pl{it['dih_planes']}",
+                  desc="DIH realisations")
     pel_item = {"seed": ctx.seed, "crop_px": list(sc["pellet_crop_px"]), "planes": sc["pellet_planes"],
                 "alpha_range": list(sc["pellet_alpha_range"]), "spp": sc["spp"], "n": sc["pellets"]}
-    pel = ctx.cached(f"pellets_s{ctx.seed}_crop{pel_item['crop_px'][0]}x{pel_item['crop_px'][1]}_pl{pel_item['planes']}"
+    pel = ctx.cached(f"pellets2_s{ctx.seed}_crop{pel_item['crop_px'][0]}x{pel_item['crop_px'][1]}_pl{pel_item['planes']}"
                      f"_a{pel_item['alpha_range'][0]}_{pel_item['alpha_range'][1]}_spp{pel_item['spp']}_n{pel_item['n']}",
                      lambda: pellet_point(pel_item))
-
     shock_item = {"seed": ctx.seed, "n": sc["pellets"], "dih_px": sc["dih_px"][0]}
     shock = ctx.cached(f"shock_s{ctx.seed}_n{shock_item['n']}_px{shock_item['dih_px']}", lambda: dih_shock_point(shock_item))
-    by = {(it["we"], it["tau"]): r for it, r in zip(items, plen, strict=True)}
-    stats = {}
-    for (we, tau), r in by.items():
-        p, disp = np.asarray(r["positions_mm"]).reshape(-1, 3), np.asarray(r["displacements_mm"]).reshape(-1, 3)
-        me = model_error(p, disp) if len(p) >= 3 else None
-        stats[(we, tau)] = {"sx": me["x"]["sd_mm"] if me else math.nan, "sz": me["z"]["sd_mm"] if me else math.nan,
-                            "mean_d": float(np.mean(r["diameters_mm"])) if r["diameters_mm"] else math.nan}
-    ref = by[(784, 5.1)]
-    sx, sz = stats[(784, 5.1)]["sx"], stats[(784, 5.1)]["sz"]
-    crop_note = (f"crop {sc['crop_px'][0]}x{sc['crop_px'][1]} px of the 6600x4400 sensor aimed at "
-                 f"({sc['aim_mm'][0]}, {sc['aim_mm'][1]}) mm; {ref['n_truth_visible']} fragments in view")
+
+    conds = list(sc["conditions"])
+    stats = {c: _condition_stats([r for it, r in zip(items, plen, strict=True) if (it["we"], it["tau"]) == c], c[0])
+             for c in conds}
+    ref = stats[(784, 5.1)]
+    scale_note = (f"{'quick' if ctx.quick else 'full'}: {reals} realisation(s) of a {sc['crop_px'][0]}x{sc['crop_px'][1]} px "
+                  f"crop of the 6600x4400 sensor aimed at ({sc['aim_mm'][0]}, {sc['aim_mm'][1]}) mm, {sc['planes']} planes")
+    flow_note = ("the fragments' film-plane velocity scatter is the paper's x model error over 150 us (an input: the paper "
+                 "reads sd_x as the flow's scatter, x being measured without error)")
+
+    # the laws of Figs. 28-29, per We, over the conditions run
     laws, curves = {}, {}
     for we in (624, 784, 1051):
-        taus = [tau for (w, tau) in sc["conditions"] if w == we]
-        ratio = np.asarray([stats[(we, tau)]["mean_d"] for tau in taus]) / condition(we).d0_mm
-        good = np.isfinite(ratio) & (ratio > 0)
-        laws[we] = power_law_fit(np.asarray(taus)[good], ratio[good]) if good.sum() >= 2 else (math.nan, math.nan)
-        if taus:
-            curves[f"mean_d_over_d0_we{we}"] = Curve(x=taus, y={"plenoptic": [_nan(v) for v in ratio.tolist()]},
-                                                     x_label="tau", y_label="d/d0")
+        taus = [tau for (w, tau) in conds if w == we]
+        if not taus:
+            continue
+        d0 = condition(we).d0_mm
+        truth_d = [_nan(np.mean(stats[(we, t)]["truth_d_mm"]) / d0) if stats[(we, t)]["truth_d_mm"].size else None
+                   for t in taus]
+        dd0 = [stats[(we, t)]["mean_d"] / d0 for t in taus]
+        laws[we] = {"d": _fit_or_nan(taus, dd0), "vr": _fit_or_nan(taus, [stats[(we, t)]["vr_over_v0"] for t in taus])}
+        curves[f"mean_d_over_d0_we{we}"] = Curve(x=taus, y={"plenoptic": [_nan(v) for v in dd0], "truth in view": truth_d},
+                                                 x_label="tau", y_label="d/d0 (Fig. 28 left)")
+        curves[f"vr_over_v0_we{we}"] = Curve(x=taus, y={"plenoptic": [_nan(stats[(we, t)]["vr_over_v0"]) for t in taus],
+                                                        "truth in view": [_nan(stats[(we, t)]["truth_vr_over_v0"])
+                                                                          for t in taus]},
+                                             x_label="tau", y_label="radial velocity / v0 (Fig. 28 right)")
+        curves[f"abs_vx_vz_over_v0_we{we}"] = Curve(
+            x=taus, y={"|u_x|/v0": [_nan(stats[(we, t)]["abs_vx_over_v0"]) for t in taus],
+                       "|u_z|/v0": [_nan(stats[(we, t)]["abs_vz_over_v0"]) for t in taus]},
+            x_label="tau", y_label="velocity / v0 (Fig. 29)")
     # eq. 22 and eq. 23 (Figs. 26-27): the theoretical depth resolution of each technique
     pcam = paper_003_camera("drop_impact")
     eq22 = dict(aperture_mm=pcam.focal_length_mm / pcam.f_number, pixels_per_lenslet=pcam.mla_pitch_um / pcam.pixel_pitch_um,
@@ -438,51 +540,89 @@ def run(ctx) -> ReplicationResult:
         x=d_axis.tolist(), y={f"eq. 23, {DIH_WAVELENGTH_NM:.0f} nm": (dih_depth_resolution(d_axis, DIH_WAVELENGTH_NM)
                                                                   / d_axis).tolist()},
         x_label="particle diameter [mm]", y_label="depth resolution / d (Fig. 27)")
-    # DIH depth and sizing on the same fragments (Fig. 27; [27]: "approximately 0.7 of the mean
-    # droplet diameter", from the symmetry of in-plane and out-of-plane velocities)
-    md, ed = np.asarray(dih["matched_d_mm"]), np.asarray(dih["depth_error_d"])
-    dih_sd_over_d = float(np.std(ed * md, ddof=1) / md.mean()) if md.size >= 3 else math.nan
+    # Fig. 26: the paper's z uncertainty over the mean diameter, one point per condition, with
+    # the quadrature reading and the true displacement error beside it
+    order = sorted(conds, key=lambda c: (stats[c]["mean_d"] if math.isfinite(stats[c]["mean_d"]) else math.inf))
+    curves["plenoptic_z_unc_over_d_by_condition"] = Curve(
+        x=[_nan(stats[c]["mean_d"]) for c in order],
+        y={"(sd_z - sd_x)/d (paper's method)": [_nan(stats[c]["z_unc"] / stats[c]["mean_d"]) for c in order],
+           "sqrt(sd_z^2 - sd_x^2)/d": [_nan(stats[c]["z_unc_q"] / stats[c]["mean_d"]) for c in order],
+           "true z displacement error s.d./d": [_nan(stats[c]["truth_sd_dz"] / stats[c]["mean_d"]) for c in order]},
+        x_label="mean measured diameter [mm] (one point per (We, tau))", y_label="z uncertainty / d (Fig. 26)")
+    # per fragment against the truth, binned by diameter, both techniques (Figs. 26-27)
     edges = np.round(np.arange(0.0, 0.45, 0.05), 2)
-    binned = [np.median(np.abs(ed[(md >= a) & (md < b)])) if np.any((md >= a) & (md < b)) else math.nan
-              for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    centres = (0.5 * (edges[:-1] + edges[1:])).round(3).tolist()
+    md, ed = _pool(dih, "matched_d_mm"), _pool(dih, "depth_error_d")
+    pd_all = np.concatenate([stats[c]["matched_truth_d_mm"] for c in conds])
+    pe_all = np.concatenate([stats[c]["depth_error_mm"] for c in conds])
     curves["dih_abs_dz_over_d_by_diameter"] = Curve(
-        x=(0.5 * (edges[:-1] + edges[1:])).round(3).tolist(), y={"DIH median |dz|/d": [_nan(v) for v in binned]},
+        x=centres, y={"DIH median |dz|/d": _binned_abs(md, ed, edges)},
         x_label="particle diameter [mm] (bin centre)", y_label="depth error / d (Fig. 27)")
+    curves["plenoptic_abs_dz_over_d_by_diameter"] = Curve(
+        x=centres, y={"plenoptic median |dz|/d": _binned_abs(pd_all, pe_all / np.maximum(pd_all, 1e-12), edges)},
+        x_label="particle diameter [mm] (bin centre)", y_label="depth error / d (Fig. 26, against the truth)")
+    dih_sd_over_d = float(np.std(ed * md, ddof=1) / md.mean()) if md.size >= 3 else math.nan
+    dih_n = np.asarray([r["n_found"] for r in dih], dtype=np.float64)
+    dih_matched = sum(r["n_matched"] for r in dih)
+    dih_vis = sum(r["n_truth_visible"] for r in dih)
+    dih_size_err = _pool(dih, "size_error_mm")
     pd = np.asarray(pel["diameters_mm"])
     pdz = np.asarray(pel["dz_mm"])
     pel_mean = float(pd.mean()) if pd.size else math.nan
     pel_sd_over_d = float(np.std(pdz, ddof=1) / pel_mean) if pdz.size >= 3 else math.nan
-    skeleton = "skeleton: crop and thin stack; not yet the paper's full conditions"
+    plen_sd_over_d = ref["truth_sd_dz"] / ref["mean_d"]
+    sx, sz = ref["sx"], ref["sz"]
     rows = [
         compare_value("n_found_dih_we784_tau5.1", "fragments found per realisation, DIH", "Sec. VI.A.1",
-                      PAPER["n_found_dih"], dih["n_found"], rel=0.3, why="realisation scatter (not stated)",
-                      note=f"{skeleton}; DIH crop {sc['dih_px'][0]}x{sc['dih_px'][1]} px of 7.4 um "
-                           f"({dih['n_truth_visible']} fragments in it)"),
+                      PAPER["n_found_dih"], float(dih_n.mean()), rel=0.3, why="realisation scatter (not stated)",
+                      note=f"{scale_note}; DIH crop {sc['dih_px'][0]}x{sc['dih_px'][1]} px of 7.4 um, "
+                           f"{dih_vis / max(len(dih), 1):.1f} fragments in it per realisation (the paper's count is the "
+                           "whole field, ours a crop)"),
         compare_value("n_found_plenoptic_we784_tau5.1", "fragments found per realisation, plenoptic", "Sec. VI.A.1",
-                      PAPER["n_found_plenoptic"], ref["n_found"], rel=0.3, why="realisation scatter (not stated)",
-                      note=f"{skeleton}; {crop_note}"),
+                      PAPER["n_found_plenoptic"], ref["n_found_mean"], rel=0.3, why="realisation scatter (not stated)",
+                      note=f"{scale_note}; {ref['n_visible_mean']:.1f} fragments in view per realisation (s.d. of the "
+                           f"count {_num(ref['n_found_sd']):.1f}; the paper's count is the whole field, ours a crop)"),
         compare_value("model_err_x_mm_we784_tau5.1", "s.d. of the x model error", "Fig. 25, Table 2",
                       PAPER["model_err_x_mm"], sx, unit="mm", rel=0.3, why="condition-to-condition spread of Table 2",
-                      note=skeleton),
+                      note=f"{scale_note}; {ref['n_pairs']} matched pairs; {flow_note}, so this row checks that our x "
+                           f"measurement adds little (true x displacement error s.d. {_num(ref['truth_sd_dx']):.3f} mm)"),
         compare_value("model_err_z_mm_we784_tau5.1", "s.d. of the z model error", "Fig. 25, Table 2",
                       PAPER["model_err_z_mm"], sz, unit="mm", rel=0.3, why="Table 2's z values span 0.34-0.45 mm",
-                      note=skeleton),
-        compare_value("z_uncertainty_mm_we784_tau5.1", "z positional uncertainty (sd_z - sd_x)", "Table 2",
-                      0.148, float(z_uncertainty(sx, sz)), unit="mm", rel=0.5, why="difference of two scattered s.d.",
-                      note=skeleton),
+                      note=f"{scale_note}; the flow's scatter plus our depth error"),
+        compare_value("z_uncertainty_mm_we784_tau5.1", "z positional uncertainty (sd_z - sd_x, the paper's method)",
+                      "Table 2", 0.148, ref["z_unc"], unit="mm", rel=0.5, why="difference of two scattered s.d.",
+                      note=scale_note),
+        compare_value("z_uncertainty_quadrature_mm_we784_tau5.1", "z uncertainty as sqrt(sd_z^2 - sd_x^2)",
+                      "Table 2 (its values in quadrature)", float(np.sqrt(0.411**2 - 0.263**2)), ref["z_unc_q"],
+                      unit="mm", rel=0.5, why="as the row above",
+                      note="independent errors add in quadrature; the paper's linear difference understates them "
+                           "(mitpiv.analysis.drop_fragments.z_uncertainty_quadrature)"),
+        compare_value("plen_true_dz_disp_sd_mm_we784_tau5.1", "true s.d. of the z displacement error (against the truth)",
+                      "Table 2 (the paper's estimate)", 0.148, ref["truth_sd_dz"], unit="mm", rel=0.5,
+                      why="the paper's estimate of this quantity, from the model errors",
+                      note=f"{scale_note}; {ref['n_truth_pairs']} pairs matched to the truth; compare with the two "
+                           "estimates above: the better estimator is the one closer to this"),
+        compare_trend("plen_true_dx_disp_sd_mm_we784_tau5.1", "true s.d. of the x displacement error (against the "
+                      "truth)", "Sec. VI.A.1", "negligible ('assuming negligible uncertainty in the x direction')",
+                      ref["truth_sd_dx"], bool(ref["truth_sd_dx"] < 0.25 * PAPER["model_err_x_mm"]), unit="mm",
+                      tolerance="< 1/4 of the 0.263 mm x model error (then it adds < 3 % to it in quadrature)",
+                      note=f"{scale_note}; {ref['n_truth_pairs']} pairs matched to the truth"),
+        compare_value("plen_true_dz_sd_over_mean_d_we784_tau5.1", "true z displacement error s.d. over the mean measured "
+                      "diameter", "Sec. VI.A.1", 0.75, plen_sd_over_d, rel=0.5,
+                      why="the paper's 0.148 / 0.199 mm", note=f"{scale_note}; mean measured d {ref['mean_d']:.3f} mm"),
         compare_value("dewarp_pre_z_err_mm", "mean |z error| of the dot-card dots before dewarping", "Sec. V.A",
                       0.8, cal["pre_mean_abs_z_err_mm"], unit="mm", rel=0.5, why="'approximately 0.8 mm'",
-                      note=f"{skeleton}; depends on the main lens's distortion, which the paper does not state "
-                           f"(ours k1 = {K1_MAIN_LENS}); {cal['n_dots']} dots on {cal['cards_used']} cards of "
-                           f"{len(card['card_depths_mm'])} (pitch {card['card_pitch_mm']} mm, dots {card['card_dot_mm']} mm); "
-                           f"after the second-order dewarp: {cal['post_mean_abs_z_err_mm']:.3f} mm"),
+                      note=f"depends on the main lens's distortion, which the paper does not state "
+                           f"(ours k1 = {K1_MAIN_LENS}, centred on the crop); {cal['n_dots']} dots on {cal['cards_used']} "
+                           f"cards of {len(card['card_depths_mm'])} (pitch {card['card_pitch_mm']} mm, dots "
+                           f"{card['card_dot_mm']} mm); after the second-order dewarp: {cal['post_mean_abs_z_err_mm']:.3f} mm"),
         compare_value("dih_depth_sd_over_mean_d_we784_tau5.1", "DIH depth error s.d. over the mean diameter",
-                      "[27] via Sec. VI.A.2", 0.7, dih_sd_over_d, rel=0.5,
-                      why="[27]: 'approximately 0.7', from velocity symmetry over many realisations; one crop here",
-                      note=f"{skeleton}; against the truth: {dih['n_matched']} of {dih['n_truth_visible']} fragments "
-                           f"matched, median |dz| {_num(dih['depth_median_abs_d']):.2f} d, RMS "
-                           f"{_num(dih['depth_rms_d']):.2f} d, size bias {1e3 * _num(dih['size_bias_mm']):+.0f} um; "
-                           f"eq. 23 at {DIH_WAVELENGTH_NM:.0f} nm puts the depth resolution of a 0.1 mm droplet at "
+                      "[27] via Sec. VI.A.1", 0.72, dih_sd_over_d, rel=0.5,
+                      why="[27]: 'approximately 0.7', from velocity symmetry over many realisations",
+                      note=f"{scale_note}; against the truth: {dih_matched} of {dih_vis} fragments matched over "
+                           f"{len(dih)} realisation(s), median |dz| {_num(np.median(np.abs(ed)) if ed.size else None):.2f} d, "
+                           f"size bias {1e3 * _num(dih_size_err.mean() if dih_size_err.size else None):+.0f} um; eq. 23 at "
+                           f"{DIH_WAVELENGTH_NM:.0f} nm puts the depth resolution of a 0.1 mm droplet at "
                            f"{float(dih_depth_resolution(0.1, DIH_WAVELENGTH_NM)):.0f} mm"),
         compare_value("plenoptic_dz_theory_mm", "theoretical plenoptic depth resolution, eq. 22 as printed",
                       "Sec. VI.A.2, eq. 22", 0.24, dz22["printed"], unit="mm", rel=0.05,
@@ -500,60 +640,179 @@ def run(ctx) -> ReplicationResult:
                       "(diffuse white light)", "Figs. 30-31", "bands in DIH only",
                       shock["sd_with"], bool(shock["sd_with"] > 10 * max(shock["sd_without"], 1e-6)),
                       tolerance="DIH background s.d. with shocks > 10x without",
-                      note=f"{skeleton}; DIH background intensity s.d. {shock['sd_with']:.3g} with the shock screens, "
+                      note=f"DIH background intensity s.d. {shock['sd_with']:.3g} with the shock screens, "
                            f"{shock['sd_without']:.2g} without (Mach {shock['mach']:.2f}, cone half-angle "
                            f"{shock['mach_angle_deg']:.0f} deg); the plenoptic render has no refractive-index field "
                            "(diffuse light, ray optics): no bands by construction"),
         compare_value("pellet_mean_d_mm", "mean pellet diameter", "Sec. VI.B.3", PAPER["pellet_mean_d_mm"], pel_mean,
                       unit="mm", rel=0.1, why="manufacturer 2 mm; the paper's s.d. 0.78 mm",
-                      note=f"{skeleton}; {pel.get('n_truth', 0)} pellets of 2.0 mm, crop {sc['pellet_crop_px']} px"),
+                      note=f"{pel.get('n_truth', 0)} pellets of 2.0 mm, crop {sc['pellet_crop_px']} px, "
+                           f"{sc['pellet_planes']} planes"),
         compare_value("pellet_z_sd_over_d", "s.d. of the pellet z displacement over the mean diameter", "Fig. 33",
                       PAPER["pellet_z_sd_over_d"], pel_sd_over_d, rel=0.5, why="few pellets per run",
-                      note=f"{skeleton}; {pdz.size} matched pellets"),
+                      note=f"{pdz.size} matched pellets"),
     ]
     not_run = "not run at the quick scale (Table 2's other conditions: full scale only)"
     for (we, tau), (px, pz, _) in sorted(PAPER_TABLE_2.items()):
         if (we, tau) == (784, 5.1):
             continue
-        st = stats.get((we, tau), {"sx": math.nan, "sz": math.nan})
-        note = skeleton if (we, tau) in stats else not_run
+        st = stats.get((we, tau), {"sx": math.nan, "sz": math.nan, "n_pairs": 0})
+        note = f"{scale_note}; {st['n_pairs']} matched pairs" if (we, tau) in stats else not_run
         rows += [compare_value(f"model_err_x_mm_we{we}_tau{tau}", f"s.d. of the x model error, We {we}, tau {tau}",
                                "Table 2", px, st["sx"], unit="mm", rel=0.3, why="as at We 784, tau 5.1", note=note),
                  compare_value(f"model_err_z_mm_we{we}_tau{tau}", f"s.d. of the z model error, We {we}, tau {tau}",
                                "Table 2", pz, st["sz"], unit="mm", rel=0.3, why="as at We 784, tau 5.1", note=note)]
     for we in (624, 784, 1051):
-        q, n = laws[we]
-        note = (f"{skeleton}; the fragment model's law is a placeholder (q = 0.0603, n = 0) until [27]'s fits are "
-                "transcribed: this row measures the detection's bias on it") if math.isfinite(q) else not_run
+        law = FRAGMENT_LAW[we]
+        q, n = laws.get(we, {}).get("d", (math.nan, math.nan))
+        vq, vn = laws.get(we, {}).get("vr", (math.nan, math.nan))
+        note = (f"{scale_note}; the fragment model's size law is {law['source']} (q = {law['q']:.4f}, n = {law['n']:g} "
+                "at detachment): this row measures what detection and sizing make of it") if we in laws else not_run
         rows += [Row(f"q_we{we}", f"q of d/d0 = q tau^n at We {we}", "Fig. 28 (left)", "power law (value not printed)",
                      _nan(q), note=note),
                  Row(f"n_we{we}", f"n of d/d0 = q tau^n at We {we}", "Fig. 28 (left)", "power law (value not printed)",
-                     _nan(n), note=note)]
+                     _nan(n), note=note),
+                 compare_trend(f"vr_n_we{we}", f"exponent of v_r/v0 = q tau^n at We {we}", "Fig. 28 (right)",
+                               "radial velocity decreases with tau (n < 0)", _nan(vn), bool(math.isfinite(vn) and vn < 0),
+                               tolerance="sign of n",
+                               note=(f"{scale_note}; q = {vq:.3f}; the model's rim speed goes as tau_e^-1/2 "
+                                     "(Yarin & Weiss)") if we in laws else not_run)]
+    figures = _figures(ctx, stats, conds, ref, laws, curves, dih_md=md, dih_ed=ed, pd_all=pd_all, pe_all=pe_all,
+                       dz22=dz22)
     sections = [
-        "## Method (skeleton)\n\nThe paper's plenoptic camera (6600 x 4400 px of 5.5 um, 471 x 362 hexagonal "
+        "## Method\n\nThe paper's plenoptic camera (6600 x 4400 px of 5.5 um, 471 x 362 hexagonal "
         "lenslets of 77 um at 308 um, 105 mm main lens at f/2.8; |M| = 0.8235 fitted to the paper's alpha range) "
-        f"with a radial main-lens distortion k1 = {K1_MAIN_LENS} (not stated in the paper), cropped to "
-        f"{sc['crop_px'][0]} x {sc['crop_px'][1]} px; fragments at (We, tau) {sc['conditions']} from the Yarin-Weiss "
-        f"crown model; raw images decoded {SUPERSAMPLE}x supersampled and refocused into stacks of {sc['planes']} "
-        f"planes evenly spaced in alpha over {sc['alpha_range']}; the hybrid detection; the dot-card dewarp "
-        f"(rendered cards at {len(card['card_depths_mm'])} depths every 2.5 mm, {card['card_dot_mm']} mm dots at "
-        f"{card['card_pitch_mm']} mm pitch, each refocused into its own stack, dots located by their sharpest plane, "
-        "second-order polynomial in 3D); nearest-neighbour matching of the two frames 150 us apart; the model error "
-        "as in Fig. 25. DIH: 7.4 um pixels, 532 nm (assumed), a crop of the sensor, the same fragments. Pellets: 2 mm "
-        f"at {PELLET_SPEED_M_S:.0f} m/s (Mach {PELLET_SPEED_M_S / SOUND_SPEED_M_S:.2f}; the paper gives no speed), "
+        f"with a radial main-lens distortion k1 = {K1_MAIN_LENS} (not stated in the paper; centred on the crop), cropped "
+        f"to {sc['crop_px'][0]} x {sc['crop_px'][1]} px; {reals} realisation(s) of each (We, tau) of {conds}. "
+        "Fragments: the Yarin-Weiss crown model (mitpiv.physics.drop_impact) with a film-plane velocity scatter whose "
+        "s.d. is Table 2's x model error over 150 us (an input, since the paper reads sd_x as the flow's own scatter); "
+        "the size law is a placeholder (below). Raw images decoded "
+        f"{SUPERSAMPLE}x supersampled and refocused into stacks of {sc['planes']} planes evenly spaced in alpha over "
+        f"{sc['alpha_range']}; the hybrid detection; the dot-card dewarp (rendered cards at "
+        f"{len(card['card_depths_mm'])} depths every 2.5 mm, {card['card_dot_mm']} mm dots at {card['card_pitch_mm']} mm "
+        "pitch, each refocused into its own stack, dots located by their sharpest plane, second-order polynomial in "
+        "3D); nearest-neighbour matching of the two frames 150 us apart; the model error as in Fig. 25, pooled over the "
+        "realisations as the paper pooled its 250 pairs. Against the truth (which the paper did not have): each "
+        "detection matched in the image plane within 1.5 diameters gives a depth error, each matched pair a "
+        "displacement error. DIH: 7.4 um pixels, 532 nm (assumed), a crop of its sensor, the same fragments. Pellets: "
+        f"2 mm at {PELLET_SPEED_M_S:.0f} m/s (Mach {PELLET_SPEED_M_S / SOUND_SPEED_M_S:.2f}; the paper gives no speed), "
         "plenoptic at |M| = 0.283 without a dewarp (as the paper); their shocks as phase screens in the DIH beam.",
-        "## Not yet replicated\n\n- a full run and its wall time (the full 6600 x 4400 sensor's 1000-plane stack, "
-        "2x supersampled as here, measured by `python bench/bench_lightfield.py --full` on 2 cores: decoding 9.7 s, "
-        "92 s for the 1000 planes, 2.72 GB streamed to disk);\n- enough realisations "
-        "for the statistics (the paper: 250 image pairs per condition; the quick crop holds a dozen fragments);\n"
-        "- the Figs. 26-27 measured depth uncertainties per particle beside the theoretical curves (the curves "
-        "dz_over_d_theory_plenoptic and dz_over_d_theory_dih are computed; the per-particle uncertainty is not);\n"
-        "- [27]'s fragment-size and velocity fits (the size law is a placeholder: q = 0.0603, n = 0);\n"
-        "- the DIH sizing and depth accuracy on the same fragments at full scale (the row "
-        "dih_depth_sd_over_mean_d_we784_tau5.1 and the curve dih_abs_dz_over_d_by_diameter are computed on the crop; "
-        "[27] reports about 0.7 d over many realisations).",
+        "## Findings\n\n- The paper's z uncertainty subtracts two standard deviations (sd_z - sd_x). If the depth "
+        "error is independent of the flow's scatter, they add in quadrature, and the linear difference understates "
+        f"the error: at We 784, tau 5.1 ours gives {ref['z_unc']:.3f} mm by the paper's method, "
+        f"{ref['z_unc_q']:.3f} mm in quadrature, and {_num(ref['truth_sd_dz']):.3f} mm against the truth "
+        "(Table 2's own values give 0.148 and 0.316 mm).\n"
+        f"- With the x scatter an input, our x model error is {sx:.3f} mm against the 0.263 mm put in: the true x "
+        f"displacement error ({_num(ref['truth_sd_dx']):.3f} mm) is what the paper assumed negligible.",
+        "## Not yet replicated\n\n- the whole 6600 x 4400 field per realisation: the counts of found fragments are "
+        "of a crop (the full sensor's 1000-plane stack, 2x supersampled, measured by `python "
+        "bench/bench_lightfield.py --full` on 2 cores: decoding 9.7 s, 92 s for the 1000 planes, 2.72 GB streamed to "
+        "disk); the main-lens distortion is centred on the crop, not on the full field;\n"
+        "- [27]'s fragment-size and velocity fits (not in the seed paper, the cited paper not available): the size "
+        "law is a placeholder (q = 0.0603, n = 0, from the seed paper's 0.199 mm mean at We 784, tau 5.1, which is "
+        "itself a plenoptic measurement clipped at one pixel), so q_we*/n_we* measure our sizing of that law, not "
+        "the paper's laws;\n"
+        "- the paper's 250 image pairs per condition (ours: the realisations above).",
     ]
-    return ReplicationResult(rows=rows, curves=curves, sections=sections, figures=[])
+    return ReplicationResult(rows=rows, curves=curves, sections=sections, figures=figures)
+
+
+def _figures(ctx, stats, conds, ref, laws, curves, *, dih_md, dih_ed, pd_all, pe_all, dz22) -> list[str]:
+    """Figs. 24-29 beside the paper's: size histogram, displacements with the linear fits,
+    depth uncertainty against diameter with eqs. 22-23, and d/d0, v_r/v0, |u_x|/v0,
+    |u_z|/v0 against tau with the power-law fits."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mitpiv.analysis.drop_fragments import dih_depth_resolution
+
+    out = []
+    fig, ax = plt.subplots(figsize=(5.5, 3.8))
+    bins = np.arange(0.0, 0.6, 0.02)
+    ax.hist(ref["truth_d_mm"], bins=bins, histtype="step", color="0.4", label="truth in view")
+    ax.hist(ref["d"], bins=bins, alpha=0.7, label="plenoptic, measured")
+    ax.axvline(0.049, color="k", ls=":", lw=1, label="one output pixel, 49 um (paper)")
+    ax.set_xlabel("diameter [mm]")
+    ax.set_ylabel("count (all realisations)")
+    ax.set_title("Fig. 24: drop sizes, We 784, tau 5.1", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    out.append(ctx.figure(fig, "fig24_size_histogram.png"))
+    plt.close(fig)
+
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8))
+    me = ref["me"]
+    for ax, k, name in ((axes[0], 0, "x"), (axes[1], 2, "z")):
+        if me is not None:
+            r = ref["p"][:, k]
+            ax.plot(r, ref["disp"][:, k], ".", ms=3, alpha=0.6)
+            xs = np.linspace(r.min(), r.max(), 2)
+            ax.plot(xs, me[name]["intercept_mm"] + me[name]["slope"] * xs, "k-",
+                    label=f"linear fit; model error s.d. {me[name]['sd_mm']:.3f} mm")
+            ax.legend(fontsize=7)
+        ax.set_xlabel(f"{name} from the impact centre [mm]")
+        ax.set_ylabel(f"{name} displacement [mm]")
+    axes[0].set_title("Fig. 25: displacements, We 784, tau 5.1 (paper: x 0.263, z 0.411 mm)", fontsize=9)
+    fig.tight_layout()
+    out.append(ctx.figure(fig, "fig25_displacements.png"))
+    plt.close(fig)
+
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8))
+    dax = np.linspace(0.03, 0.6, 60)
+    ax = axes[0]
+    for form, ls in (("printed", "-"), ("paraxial", "--")):
+        ax.plot(dax, dz22[form] / dax, "k" + ls, lw=1, label=f"eq. 22 {form} ({dz22[form]:.3f} mm)")
+    ok = pd_all > 0
+    ax.plot(pd_all[ok], np.abs(pe_all[ok]) / pd_all[ok], ".", ms=3, alpha=0.5, label="|dz|/d per fragment (truth)")
+    c = curves["plenoptic_z_unc_over_d_by_condition"]
+    for lab, mk in zip(c.y, "os^", strict=False):
+        ax.plot(c.x, [np.nan if v is None else v for v in c.y[lab]], mk, mfc="none", label=lab)
+    ax.set_yscale("log")
+    ax.set_xlabel("particle diameter [mm]")
+    ax.set_ylabel("depth uncertainty / d")
+    ax.set_title("Fig. 26: plenoptic", fontsize=9)
+    ax.legend(fontsize=6)
+    ax = axes[1]
+    ax.plot(dax, dih_depth_resolution(dax, DIH_WAVELENGTH_NM) / dax, "k-", lw=1, label="eq. 23, d/lambda")
+    ok = dih_md > 0
+    ax.plot(dih_md[ok], np.abs(dih_ed[ok]), ".", ms=3, alpha=0.6, label="|dz|/d per fragment (truth)")
+    ax.set_yscale("log")
+    ax.set_xlabel("particle diameter [mm]")
+    ax.set_title("Fig. 27: DIH", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    out.append(ctx.figure(fig, "fig26-27_depth_uncertainty.png"))
+    plt.close(fig)
+
+    fig, axes = plt.subplots(1, 4, figsize=(14, 3.6))
+    for we, col in zip((624, 784, 1051), ("C0", "C1", "C2"), strict=True):
+        taus = [t for (w, t) in conds if w == we]
+        if not taus:
+            continue
+        ts = np.linspace(min(taus), max(taus), 30)
+        for ax, key, fit in ((axes[0], "mean_d", "d"), (axes[1], "vr_over_v0", "vr"), (axes[2], "abs_vx_over_v0", None),
+                             (axes[3], "abs_vz_over_v0", None)):
+            ys = [stats[(we, t)][key] / (stats[(we, t)]["d0"] if key == "mean_d" else 1.0) for t in taus]
+            ax.plot(taus, ys, "o", color=col, label=f"We {we}")
+            if key == "vr_over_v0":
+                ax.plot(taus, [stats[(we, t)]["truth_vr_over_v0"] for t in taus], "x", color=col,
+                        label=f"truth in view, We {we}")
+            if fit is not None:
+                q, n = laws[we][fit]
+                if math.isfinite(q):
+                    ax.plot(ts, q * ts**n, "-", color=col, lw=1)
+    for ax, lab in zip(axes, ("d/d0 (Fig. 28 left)", "v_r/v0 (Fig. 28 right)", "|u_x|/v0 (Fig. 29 left)",
+                              "|u_z|/v0 (Fig. 29 right)"), strict=True):
+        ax.set_xlabel("tau")
+        ax.set_ylabel(lab)
+    axes[0].legend(fontsize=7)
+    axes[1].legend(fontsize=6)
+    fig.tight_layout()
+    out.append(ctx.figure(fig, "fig28-29_vs_tau.png"))
+    plt.close(fig)
+    return out
 
 
 def _nan(v):
