@@ -358,11 +358,16 @@ def hybrid_detect(stack, z_mm, *, background=None, threshold: float = 0.5, min_a
 
 
 def match_frames(a: BacklitDetections, b: BacklitDetections, *, dt_s: float, radius_mm: float,
-                 predictor_mm=None) -> dict:
+                 predictor_mm=None, axis=None) -> dict:
     """Nearest-neighbour (optimal one-to-one) matching of world positions between two frames.
 
     predictor_mm : expected displacement (3,) or (N_a, 3) added to frame a before matching.
-    Returns ``pairs`` (K, 2), ``velocity_mm_s`` (K, 3) and the matched positions of a.
+    axis : a viewing direction (3,): match within ``radius_mm`` in the plane normal to it,
+        leaving the depth free (the uncertain coordinate of a single-view technique, whose
+        error would otherwise break pairs: DIH depth errors reach several mm); None matches
+        in 3D.
+    Returns ``pairs`` (K, 2), ``velocity_mm_s`` (K, 3, depth included) and the matched
+    positions of a.
     """
     from mitpiv.analysis.particles import assign
 
@@ -371,7 +376,14 @@ def match_frames(a: BacklitDetections, b: BacklitDetections, *, dt_s: float, rad
     dt_s = check_positive("dt_s", dt_s, owner="match_frames", unit="s")
     radius_mm = check_positive("radius_mm", radius_mm, owner="match_frames", unit="mm")
     pa = a.positions_mm + (0.0 if predictor_mm is None else np.asarray(predictor_mm, dtype=np.float64))
-    pairs = assign(pa, b.positions_mm, radius_mm)
+    pb = b.positions_mm
+    if axis is not None:
+        ax = np.asarray(axis, dtype=np.float64).reshape(3)
+        if not (np.all(np.isfinite(ax)) and np.linalg.norm(ax) > 0):
+            raise ConfigError(f"match_frames: 'axis' must be a non-zero direction (3,), got {axis!r}.")
+        ax = ax / np.linalg.norm(ax)
+        pa, pb = pa - np.outer(pa @ ax, ax), pb - np.outer(pb @ ax, ax)
+    pairs = assign(pa, pb, radius_mm)
     vel = (b.positions_mm[pairs[:, 1]] - a.positions_mm[pairs[:, 0]]) / dt_s
     return {"pairs": pairs, "velocity_mm_s": vel, "positions_mm": a.positions_mm[pairs[:, 0]]}
 

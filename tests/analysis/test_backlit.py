@@ -170,6 +170,39 @@ def test_two_frames_give_three_component_velocities(optics):
         match_frames(a, b, dt_s=0.0, radius_mm=0.4)
 
 
+def _dets(pos):
+    from mitpiv.analysis.backlit import BacklitDetections
+
+    n = len(pos)
+    z = np.zeros(n)
+    return BacklitDetections(uv_px=np.zeros((n, 2)), z_stack_mm=z, area_px=z + 1, diameter_px=z + 1, aspect=z + 1,
+                             darkness=z + 1, positions_mm=np.asarray(pos, dtype=float), diameters_mm=z + 0.1)
+
+
+def test_match_frames_in_the_image_plane_leaves_depth_free():
+    """A single-view technique's depth errors (here +-5 mm, as DIH's for small droplets)
+    break 3D matching; matching normal to the viewing axis pairs the right particles and
+    keeps the depth difference in the displacement."""
+    rng = np.random.default_rng(0)
+    n = 40
+    grid = np.stack(np.meshgrid(np.arange(8), np.arange(5)), -1).reshape(-1, 2) * 2.0  # 2 mm apart
+    a = np.column_stack([grid, rng.uniform(-5, 5, n)])
+    shift = np.array([0.3, -0.1, 0.0])
+    b = a + shift
+    b[:, 2] = rng.uniform(-5, 5, n)  # depth re-measured with a large error
+    perm = rng.permutation(n)
+    da, db = _dets(a), _dets(b[perm])
+    m3 = match_frames(da, db, dt_s=1.0, radius_mm=0.6)
+    assert m3["pairs"].shape[0] < n // 2
+    m = match_frames(da, db, dt_s=1.0, radius_mm=0.6, axis=(0, 0, 2.0))
+    assert m["pairs"].shape[0] == n
+    np.testing.assert_array_equal(perm[m["pairs"][:, 1]], m["pairs"][:, 0])
+    np.testing.assert_allclose(m["velocity_mm_s"][:, :2], np.broadcast_to(shift[:2], (n, 2)), atol=1e-12)
+    np.testing.assert_allclose(m["velocity_mm_s"][:, 2], b[m["pairs"][:, 0], 2] - a[m["pairs"][:, 0], 2], atol=1e-12)
+    with pytest.raises(ConfigError, match="axis"):
+        match_frames(da, db, dt_s=1.0, radius_mm=0.6, axis=(0, 0, 0))
+
+
 def test_edge_cut_and_overlapping_droplets(optics):
     # one droplet cut by the field edge (1.65 mm half-width), two overlapping in projection
     p = np.array([[1.62, 0.0, 0.0], [0.0, 0.0, -0.5], [0.2, 0.0, 0.6], [-0.9, -0.9, 0.0]])
