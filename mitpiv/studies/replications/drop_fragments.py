@@ -3,8 +3,8 @@ fragments and shotgun pellets (seed paper 003, chapters IV-VI):
 ``mitpiv replicate drop-fragments [--quick]``.
 
 Every row is produced by the same code at both scales: the full scale runs the paper's nine
-conditions and 1000-plane stacks on a crop of the sensor, several realisations each; the
-quick scale a smaller crop, a thin stack and three conditions. What is not replicated is
+conditions and 1000-plane stacks on the whole sensor, two realisations each; the quick
+scale a crop of the sensor, a thin stack and three conditions. What is not replicated is
 listed in the report's "Not yet replicated" section.
 
 Orchestration only. The camera: :func:`mitpiv.physics.plenoptic.paper_003_camera` (with a
@@ -273,7 +273,7 @@ def _pairs(dets, truth_of, truth_disp) -> dict:
 
 
 def plenoptic_point(item: dict) -> dict:
-    """One drop impact (We, tau, realisation) seen by the cropped plenoptic camera: two
+    """One drop impact (We, tau, realisation) seen by the plenoptic camera (or a crop): two
     frames 150 us apart rendered, decoded, refocused, detected, dewarped and matched; and
     the detections against the truth (what the paper could not do): each matched
     fragment's depth error, and each matched pair's displacement error."""
@@ -309,7 +309,6 @@ def plenoptic_point(item: dict) -> dict:
     out = {"n_truth_visible": int(vis.sum()), "n_found": len(dets[0]), "truth_vr_mm_s": vr_true.tolist(),
            "truth_mean_d_mm": float(d[vis].mean()) if vis.any() else math.nan,
            "truth_d_visible_mm": d[vis].tolist(), "diameters_mm": (dets[0].diameters_mm.tolist() if len(dets[0]) else []),
-
            "matched_truth_d_mm": [], "depth_error_mm": []}
     if len(dets[0]) == 0:
         return out
@@ -846,7 +845,8 @@ def _figures(ctx, stats, conds, ref, laws, curves, *, dih_md, dih_ed, pd_all, pe
     ax.plot(pd_all[ok], np.abs(pe_all[ok]) / pd_all[ok], ".", ms=3, alpha=0.5, label="|dz|/d per fragment (truth)")
     c = curves["plenoptic_z_unc_over_d_by_condition"]
     for lab, mk in zip(c.y, "os^", strict=False):
-        ax.plot(c.x, [np.nan if v is None else v for v in c.y[lab]], mk, mfc="none", label=lab)
+        ax.plot([np.nan if v is None else v for v in c.x], [np.nan if v is None else v for v in c.y[lab]], mk,
+                mfc="none", label=lab)
     ax.set_yscale("log")
     ax.set_xlabel("particle diameter [mm]")
     ax.set_ylabel("depth uncertainty / d")
