@@ -357,6 +357,17 @@ def hybrid_detect(stack, z_mm, *, background=None, threshold: float = 0.5, min_a
     return det_
 
 
+def _lateral(axis, owner: str):
+    """The unit viewing ``axis`` (3,) and the projection onto the plane normal to it: a
+    function of (N, 3) points (the depth along the axis removed), for matching with the
+    depth left free."""
+    ax = np.asarray(axis, dtype=np.float64).reshape(3)
+    if not (np.all(np.isfinite(ax)) and np.linalg.norm(ax) > 0):
+        raise ConfigError(f"{owner}: 'axis' must be a non-zero direction (3,), got {axis!r}.")
+    ax = ax / np.linalg.norm(ax)
+    return ax, lambda p: p - np.outer(p @ ax, ax)
+
+
 def match_frames(a: BacklitDetections, b: BacklitDetections, *, dt_s: float, radius_mm: float,
                  predictor_mm=None, axis=None) -> dict:
     """Nearest-neighbour (optimal one-to-one) matching of world positions between two frames.
@@ -378,11 +389,8 @@ def match_frames(a: BacklitDetections, b: BacklitDetections, *, dt_s: float, rad
     pa = a.positions_mm + (0.0 if predictor_mm is None else np.asarray(predictor_mm, dtype=np.float64))
     pb = b.positions_mm
     if axis is not None:
-        ax = np.asarray(axis, dtype=np.float64).reshape(3)
-        if not (np.all(np.isfinite(ax)) and np.linalg.norm(ax) > 0):
-            raise ConfigError(f"match_frames: 'axis' must be a non-zero direction (3,), got {axis!r}.")
-        ax = ax / np.linalg.norm(ax)
-        pa, pb = pa - np.outer(pa @ ax, ax), pb - np.outer(pb @ ax, ax)
+        _, lateral = _lateral(axis, "match_frames")
+        pa, pb = lateral(pa), lateral(pb)
     pairs = assign(pa, pb, radius_mm)
     vel = (b.positions_mm[pairs[:, 1]] - a.positions_mm[pairs[:, 0]]) / dt_s
     return {"pairs": pairs, "velocity_mm_s": vel, "positions_mm": a.positions_mm[pairs[:, 0]]}
@@ -401,9 +409,7 @@ def evaluate_detections(det: BacklitDetections, truth_mm, truth_diameters_mm, *,
         raise ConfigError("evaluate_detections: detect with a dewarp to get world positions.")
     t = np.asarray(truth_mm, dtype=np.float64).reshape(-1, 3)
     d = np.broadcast_to(np.asarray(truth_diameters_mm, dtype=np.float64), (t.shape[0],))
-    ax = np.asarray(axis, dtype=np.float64)
-    ax = ax / np.linalg.norm(ax)
-    lateral = lambda p: p - np.outer(p @ ax, ax)  # noqa: E731
+    ax, lateral = _lateral(axis, "evaluate_detections")
     # match in the plane, scaled by the truth diameter: distance / d_truth <= radius
     scale = np.median(d) if d.size else 1.0
     pairs = assign(lateral(det.positions_mm) / scale, lateral(t) / scale, radius_diameters)

@@ -539,8 +539,8 @@ def run(ctx) -> ReplicationResult:
     shock = ctx.cached(f"shock2_s{ctx.seed}_n{shock_item['n']}_px{shock_item['dih_px']}", lambda: dih_shock_point(shock_item))
 
     conds = list(sc["conditions"])
-    stats = {c: _condition_stats([r for it, r in zip(items, plen, strict=True) if (it["we"], it["tau"]) == c], c[0])
-             for c in conds}
+    by_cond = {c: [r for it, r in zip(items, plen, strict=True) if (it["we"], it["tau"]) == c] for c in conds}
+    stats = {c: _condition_stats(by_cond[c], c[0]) for c in conds}
     # the model error of the true fields (every fragment, no measurement): what the paper's
     # estimator reads from this flow before any imaging error; the linear fit absorbs part of
     # the injected scatter, since a ballistic fragment's position carries its velocity
@@ -553,8 +553,7 @@ def run(ctx) -> ReplicationResult:
         truth_me[c] = {"sx": me_t["x"]["sd_mm"], "sz": me_t["z"]["sd_mm"],
                        "beyond_radius": float(np.mean(np.linalg.norm(tdisp, axis=1) > MATCH_RADIUS_MM))}
     ref = stats[(784, 5.1)]
-    ref_lat = _condition_stats([r for it, r in zip(items, plen, strict=True) if (it["we"], it["tau"]) == (784, 5.1)], 784,
-                               "_lat")
+    ref_lat = _condition_stats(by_cond[(784, 5.1)], 784, "_lat")
     field = ("the whole 6600x4400 sensor" if tuple(sc["crop_px"]) == (6600, 4400) else
              f"a {sc['crop_px'][0]}x{sc['crop_px'][1]} px crop of the 6600x4400 sensor aimed at ({sc['aim_mm'][0]}, "
              f"{sc['aim_mm'][1]}) mm")
