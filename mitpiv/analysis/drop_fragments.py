@@ -24,6 +24,11 @@ drop-impact fragments and shotgun pellets (seed paper 003, chapters IV-VI).
   measured position; its standard deviation per component (:func:`model_error`), and the
   z positional uncertainty as the difference of the z and x standard deviations
   (:func:`z_uncertainty`, which reproduces every row of Table 2).
+* The flow's scatter as an input (:func:`velocity_sd_for_model_error`): the film-plane
+  velocity scatter of :func:`mitpiv.physics.drop_impact.fragment_field` whose true field
+  (every fragment, no imaging) gives a stated model error. The scatter put in is not the
+  model error read out: a ballistic fragment's position carries its velocity perturbation,
+  so the linear fit absorbs part of it (a factor 1.25-1.52 over Table 2's conditions).
 * The fragment-size power law ``d/d0 = q tau^n`` (Figs. 28-29): :func:`power_law_fit`
   (least squares on the logarithms).
 * The depth-resolution limit of DIH, eq. 23 ``dz = d^2 / lambda``: :func:`dih_depth_resolution`.
@@ -43,11 +48,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mitpiv.errors import ConfigError
+from mitpiv.errors import ConfigError, check_positive
 
 __all__ = ["PAPER_DOT_CARD", "StackDewarp", "fit_stack_dewarp", "dot_card_points", "dot_card_observations",
            "locate_dots_in_stack",
-           "paper_alphas", "PAPER_ALPHA_RANGES", "model_error", "z_uncertainty",
+           "paper_alphas", "PAPER_ALPHA_RANGES", "model_error", "z_uncertainty", "velocity_sd_for_model_error",
            "z_uncertainty_quadrature", "power_law_fit",
            "dih_depth_resolution", "plenoptic_depth_resolution", "DEPTH_RESOLUTION_FORMS"]
 
@@ -299,6 +304,44 @@ def model_error(positions_mm, displacements_mm, *, centre_mm=(0.0, 0.0, 0.0), ax
         out["xyz"[k]] = {"sd_mm": float(np.std(e, ddof=1)), "slope": float(slope), "intercept_mm": float(intercept),
                          "errors_mm": e}
     return out
+
+
+def velocity_sd_for_model_error(we: int, tau: float, sd_mm: float, *, dt_s: float, axis: str = "x",
+                                n_sample: int = 20_000, seed: int = 0) -> float:
+    """The film-plane velocity scatter [mm/s] of
+    :func:`~mitpiv.physics.drop_impact.fragment_field` (Table 1 condition ``we``, time
+    ``tau``) whose true field gives a model error (:func:`model_error`, displacements over
+    ``dt_s``) of standard deviation ``sd_mm`` along ``axis``: solved by Brent's method
+    (:func:`scipy.optimize.brentq`, to 0.1 mm/s) on one large field of ``n_sample``
+    fragments, the same draws at every trial (common random numbers, so the root is that
+    of a smooth function). With ``n_sample`` 20 000 the root's sampling error is ~0.5 %.
+
+    Raises :class:`~mitpiv.errors.ConfigError` if ``sd_mm`` is below the crown model's own
+    residual (no scatter: the spread of detachment times alone departs from a linear law).
+    """
+    from scipy.optimize import brentq
+
+    from mitpiv.physics.drop_impact import condition, fragment_field
+
+    sd_mm = check_positive("sd_mm", sd_mm, owner="velocity_sd_for_model_error", unit="mm")
+    dt_s = check_positive("dt_s", dt_s, owner="velocity_sd_for_model_error", unit="s")
+    if axis not in ("x", "z"):
+        raise ConfigError(f"velocity_sd_for_model_error: axis must be 'x' or 'z' (the film plane), got {axis!r}.")
+    row = condition(we)
+
+    def sd_of(vsd):
+        f = fragment_field(we, tau, d0_mm=row.d0_mm, v0_m_s=row.v0_m_s, n_fragments=int(n_sample),
+                           velocity_sd_mm_s=float(vsd), seed=seed)
+        return model_error(f["positions_mm"], f["velocities_mm_s"] * dt_s)[axis]["sd_mm"]
+
+    floor = sd_of(0.0)
+    if sd_mm <= floor:
+        raise ConfigError(f"velocity_sd_for_model_error: sd_mm = {sd_mm!r} mm is at or below the {axis} model error of the "
+                          f"crown model without scatter ({floor:.4g} mm at We {we}, tau {tau}); ask for more than that.")
+    hi = 4.0 * sd_mm / dt_s
+    while sd_of(hi) < sd_mm:  # the fit absorbs a fraction < 1 of the scatter: widen until bracketed
+        hi *= 2.0
+    return float(brentq(lambda v: sd_of(v) - sd_mm, 0.0, hi, xtol=0.1))
 
 
 def z_uncertainty(sd_x_mm, sd_z_mm):

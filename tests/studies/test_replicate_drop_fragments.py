@@ -4,6 +4,8 @@ in tests/analysis/test_drop_fragments.py and tests/physics/test_drop_impact.py."
 
 import math
 
+import pytest
+
 from mitpiv.studies.replication import RESULTS_KEYS, replicate
 from mitpiv.studies.replications.drop_fragments import STUDY
 
@@ -90,3 +92,46 @@ def test_rendered_dot_cards_locate_the_dots():
     for k in (0, 1):
         e = err[obs["depth_index"] == k, 2]
         assert e.std() < CARD_DEPTH_SD_MM and abs(e.mean()) < CARD_DEPTH_BIAS_MM
+
+
+def _dets(pos):
+    import numpy as np
+
+    from mitpiv.analysis.backlit import BacklitDetections
+
+    z = np.zeros(len(pos))
+    return BacklitDetections(uv_px=np.zeros((len(pos), 2)), z_stack_mm=z, area_px=z + 1, diameter_px=z + 1, aspect=z + 1,
+                             darkness=z + 1, positions_mm=np.asarray(pos, dtype=float), diameters_mm=z + 0.1)
+
+
+def test_two_pass_matching_keeps_the_fast_fragments():
+    """The true field of We 784, tau 5.1 with Table 2's x model error (0.263 mm): 40 % of
+    the displacements exceed the 0.6 mm nearest-neighbour radius, which pairs only the slow
+    ones (or wrong ones); the two-pass match (linear model as predictor) pairs >= 95 % of
+    the fragments with their own second position (the rest: neighbours closer than the
+    scatter), and the model error it reads is the true field's within 5 %."""
+    import numpy as np
+
+    from mitpiv.analysis.backlit import match_frames
+    from mitpiv.analysis.drop_fragments import model_error, velocity_sd_for_model_error
+    from mitpiv.physics.drop_impact import condition, fragment_field
+    from mitpiv.studies.replications.drop_fragments import DT_DROP_S, MATCH_RADIUS_MM, match_exposures
+
+    row = condition(784)
+    vsd = velocity_sd_for_model_error(784, 5.1, 0.263, dt_s=DT_DROP_S)
+    f = fragment_field(784, 5.1, d0_mm=row.d0_mm, v0_m_s=row.v0_m_s, n_fragments=196, velocity_sd_mm_s=vsd, seed=4)
+    p0 = f["positions_mm"]
+    disp = f["velocities_mm_s"] * DT_DROP_S
+    perm = np.random.default_rng(0).permutation(len(p0))  # frame 2 in another order
+    a, b = _dets(p0), _dets((p0 + disp)[perm])
+    own = np.argsort(perm)  # index in b of each fragment of a
+    nn = match_frames(a, b, dt_s=DT_DROP_S, radius_mm=MATCH_RADIUS_MM)
+    tr = match_exposures(a, b)
+    right = lambda t: np.mean(own[t["pairs"][:, 0]] == t["pairs"][:, 1]) * len(t["pairs"]) / len(p0)  # noqa: E731
+    assert np.mean(np.linalg.norm(disp, axis=1) > MATCH_RADIUS_MM) > 0.3
+    assert right(nn) < 0.7
+    assert right(tr) >= 0.95
+    me = model_error(tr["positions_mm"], tr["velocity_mm_s"] * DT_DROP_S)
+    true = model_error(p0, disp)
+    assert me["x"]["sd_mm"] == pytest.approx(true["x"]["sd_mm"], rel=0.05)
+    assert me["z"]["sd_mm"] == pytest.approx(true["z"]["sd_mm"], rel=0.05)
