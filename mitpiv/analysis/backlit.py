@@ -397,11 +397,18 @@ def match_frames(a: BacklitDetections, b: BacklitDetections, *, dt_s: float, rad
 
 
 def evaluate_detections(det: BacklitDetections, truth_mm, truth_diameters_mm, *, radius_diameters: float = 1.5,
-                        axis=(0.0, 0.0, 1.0)) -> dict:
+                        axis=(0.0, 0.0, 1.0), depth_tiebreak: bool = True) -> dict:
     """Detections against the truth: detected fraction, in-plane and depth errors in
     particle diameters, size error. A detection matches a truth particle within
     ``radius_diameters`` of its diameter in the plane normal to the viewing ``axis``
     (depth is left free: it is the uncertain coordinate); depth along ``axis``.
+
+    depth_tiebreak : where particles overlap in the image (several truth particles within
+        the radius of a detection, as in a dense spray seen along the beam), choose among
+        them by depth too (:func:`~mitpiv.analysis.particles.assign`'s ``tiebreak``): the
+        depth never rejects a pair, it only picks which of the overlapping particles a
+        detection is. False pairs by the image plane alone (a detection of the front
+        particle may then be scored against the one behind it).
     """
     from mitpiv.analysis.particles import assign
 
@@ -412,7 +419,8 @@ def evaluate_detections(det: BacklitDetections, truth_mm, truth_diameters_mm, *,
     ax, lateral = _lateral(axis, "evaluate_detections")
     # match in the plane, scaled by the truth diameter: distance / d_truth <= radius
     scale = np.median(d) if d.size else 1.0
-    pairs = assign(lateral(det.positions_mm) / scale, lateral(t) / scale, radius_diameters)
+    tb = ((det.positions_mm @ ax)[:, None] / scale, (t @ ax)[:, None] / scale) if depth_tiebreak else None
+    pairs = assign(lateral(det.positions_mm) / scale, lateral(t) / scale, radius_diameters, tiebreak=tb)
     ok = np.linalg.norm(lateral(det.positions_mm[pairs[:, 0]] - t[pairs[:, 1]]), axis=1) <= radius_diameters * d[pairs[:, 1]]
     pairs = pairs[ok]
     e = det.positions_mm[pairs[:, 0]] - t[pairs[:, 1]]

@@ -357,13 +357,20 @@ def _as_positions(p, name):
     return a
 
 
-def assign(a, b, radius: float) -> np.ndarray:
+def assign(a, b, radius: float, *, tiebreak=None) -> np.ndarray:
     """Minimum-total-distance one-to-one assignment between point sets a (N, d) and b
     (M, d) among pairs closer than ``radius``; returns (K, 2) index pairs.
 
     Each point may stay unmatched at a cost of ``radius``, so the assignment matches as
     many pairs as the radius allows and, among those, minimises the summed distance
     (a sparse minimum-weight bipartite matching, not a greedy nearest-neighbour pass).
+
+    tiebreak : optional pair ``(ta, tb)`` of (N, k) and (M, k) coordinates whose distance
+        is added to the cost of each candidate pair but takes no part in the gate: among
+        the pairs within ``radius`` it prefers those close in these coordinates too (e.g.
+        depth, when the gate is in the image plane only), without dropping any pair for
+        them (the unmatched cost grows by their largest candidate distance, so the number
+        of pairs is still the largest the gate allows).
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import min_weight_full_bipartite_matching
@@ -377,11 +384,18 @@ def assign(a, b, radius: float) -> np.ndarray:
     r, c, w = d.row[keep], d.col[keep], d.data[keep]
     if r.size == 0:
         return np.zeros((0, 2), np.int64)
-    eps = 1e-9 * radius
+    miss = float(radius)
+    if tiebreak is not None:
+        ta = np.asarray(tiebreak[0], dtype=np.float64).reshape(n, -1)
+        tb = np.asarray(tiebreak[1], dtype=np.float64).reshape(m, -1)
+        extra = np.linalg.norm(ta[r] - tb[c], axis=1)
+        w = w + extra
+        miss += float(extra.max())
+    eps = 1e-9 * miss
     # rows: found (n) + dummies of truth (m); cols: truth (m) + dummies of found (n)
     rows = np.concatenate([r, np.arange(n), n + np.arange(m), n + c])
     cols = np.concatenate([c, m + np.arange(n), np.arange(m), m + r])
-    wts = np.concatenate([w + eps, np.full(n, radius), np.full(m, radius), np.full(r.size, eps)])
+    wts = np.concatenate([w + eps, np.full(n, miss), np.full(m, miss), np.full(r.size, eps)])
     g = coo_matrix((wts, (rows, cols)), shape=(n + m, n + m)).tocsr()
     row, col = min_weight_full_bipartite_matching(g)
     real = (row < n) & (col < m)

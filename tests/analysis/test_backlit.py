@@ -203,6 +203,29 @@ def test_match_frames_in_the_image_plane_leaves_depth_free():
         match_frames(da, db, dt_s=1.0, radius_mm=0.6, axis=(0, 0, 0))
 
 
+def test_evaluate_detections_picks_among_overlapping_particles_by_depth():
+    """Two particles nearly on one line of sight (depth 0 and 8 mm, 0.04 mm apart in the
+    image) and a third beside them, each detected 0.1 mm deep of itself with a 0.035 mm
+    image-plane error towards the other: by the image plane alone each detection is nearer
+    the wrong particle and is scored 8 mm (40 d) off; with the depth tie-break each is
+    scored against its own particle (0.1 mm = 0.5 d). A detection with no particle within
+    the image-plane radius stays unmatched however close in depth."""
+    t = np.array([[0.0, 0.0, 0.0], [0.04, 0.0, 8.0], [3.0, 0.0, 4.0]])
+    d = np.full(3, 0.2)
+    det = _dets(np.array([[0.005, 0.0, 8.1], [0.035, 0.0, 0.1], [3.0, 0.0, 4.1]]))  # of t1, t0, t2
+    det.diameters_mm = np.full(3, 0.2)
+    ev = evaluate_detections(det, t, d, axis=(0, 0, 1))
+    assert ev["n_matched"] == 3
+    np.testing.assert_array_equal(ev["pairs"], [[0, 1], [1, 0], [2, 2]])
+    np.testing.assert_allclose(ev["depth_error_diameters"], 0.5, atol=1e-9)
+    plane = evaluate_detections(det, t, d, axis=(0, 0, 1), depth_tiebreak=False)
+    np.testing.assert_array_equal(plane["pairs"], [[0, 0], [1, 1], [2, 2]])
+    np.testing.assert_allclose(np.abs(plane["depth_error_diameters"][:2]), [40.5, 39.5], atol=1e-9)
+    far = _dets(np.array([[1.0, 1.0, 0.0]]))
+    far.diameters_mm = np.full(1, 0.2)
+    assert evaluate_detections(far, t, d, axis=(0, 0, 1))["n_matched"] == 0
+
+
 def test_edge_cut_and_overlapping_droplets(optics):
     # one droplet cut by the field edge (1.65 mm half-width), two overlapping in projection
     p = np.array([[1.62, 0.0, 0.0], [0.0, 0.0, -0.5], [0.2, 0.0, 0.6], [-0.9, -0.9, 0.0]])

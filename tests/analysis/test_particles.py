@@ -141,6 +141,38 @@ def test_assignment_is_the_optimal_one_to_one_matching():
         assert ours == pytest.approx(ref, abs=ASSIGNMENT_COST_ABS_TOL)
 
 
+def test_assignment_tiebreak_chooses_but_never_gates():
+    """With a tie-break coordinate, the number of pairs is still the largest the gate
+    allows (checked against the brute-force maximum), and among the largest matchings the
+    one of least summed (gate + tie-break) cost is chosen (brute force over permutations);
+    a tie-break distance however large rejects no pair."""
+    import itertools
+
+    rng = np.random.default_rng(5)
+    R = 0.4
+    for _ in range(30):
+        n, m = rng.integers(1, 6), rng.integers(1, 6)
+        a, b = rng.uniform(0, 1, (n, 2)), rng.uniform(0, 1, (m, 2))
+        ta, tb = rng.uniform(-50, 50, (n, 1)), rng.uniform(-50, 50, (m, 1))
+        pairs = assign(a, b, R, tiebreak=(ta, tb))
+        D = np.linalg.norm(a[:, None] - b[None], axis=2)
+        C = D + np.abs(ta - tb.T)
+        best_k, best_cost = 0, 0.0
+        for k in range(min(n, m), 0, -1):
+            costs = [sum(C[i, j] for i, j in zip(rows, cols, strict=True))
+                     for rows in itertools.combinations(range(n), k) for cols in itertools.permutations(range(m), k)
+                     if all(D[i, j] <= R for i, j in zip(rows, cols, strict=True))]
+            if costs:
+                best_k, best_cost = k, min(costs)
+                break
+        assert len(pairs) == best_k
+        assert C[pairs[:, 0], pairs[:, 1]].sum() == pytest.approx(best_cost, abs=1e-6)
+    # two detections at the same image position, two particles behind each other: depth picks
+    a = np.zeros((2, 2))
+    pairs = assign(a, a + 0.01, R, tiebreak=(np.array([[0.0], [9.0]]), np.array([[10.0], [1.0]])))
+    np.testing.assert_array_equal(pairs, [[0, 1], [1, 0]])
+
+
 def test_match_statistics_and_grid_restriction(tmp_path):
     rng = np.random.default_rng(11)
     truth = rng.uniform((0.3, 0.3, 0.3), (2.9, 2.9, 1.7), (800, 3))
