@@ -256,8 +256,8 @@ def _fragments(item: dict) -> dict:
 MATCH_RADIUS_MM = 0.6
 #: Matching radius [mm] about the predicted position (second pass): 3x the largest z model
 #: error of Table 2 (0.445 mm), so that the pairing does not truncate the scatter the model
-#: error is meant to measure (a 0.6 mm radius without predictor kept 52 % of the true
-#: displacements at We 784, tau 2.6)
+#: error is meant to measure (without a predictor, 0.6 mm misses 40-70 % of the true
+#: displacements at We 784, tau 5.1-2.6; the report states the share per condition)
 PREDICTOR_RADIUS_MM = 1.3
 
 
