@@ -135,12 +135,40 @@ def run_point(experiment_path: str, overrides: dict, out_dir: str) -> dict:
     return row
 
 
+def add_ltpr(df):
+    """LTPR columns for a sweep that compares light-field cameras with tomographic rigs
+    (Shi et al.'s light-field-to-tomographic pixel ratio, ``(p_x p_y)_LF / (p_x p_y
+    N_c)_Tomo``, :func:`mitpiv.physics.plenoptic.ltpr`): for every point that renders one
+    plenoptic camera, one column per tomographic rig of the sweep (points rendering only
+    pinhole-type cameras, several of them), ``ltpr_vs_nc{N_c}`` (``ltpr_vs_nc{N_c}_{pixels}px``
+    where rigs of the same N_c differ in pixels), its pixels over the rig's. Needs the
+    ``cameras.*`` columns the tomo kind records; a table without them is returned as it is."""
+    import numpy as np
+
+    need = {"cameras.n", "cameras.type", "cameras.pixels"}
+    if not need <= set(df.columns):
+        return df
+    ok = df["cameras.pixels"].notna() & df["cameras.n"].notna()
+    lf = ok & (df["cameras.type"] == "plenoptic") & (df["cameras.n"] == 1)
+    tomo = ok & ~df["cameras.type"].fillna("").str.contains("plenoptic") & (df["cameras.n"] > 1)
+    if not (lf.any() and tomo.any()):
+        return df
+    rigs = sorted({(int(n), int(p)) for n, p in zip(df.loc[tomo, "cameras.n"], df.loc[tomo, "cameras.pixels"],
+                                                      strict=True)})
+    per_n = {n: sum(1 for m, _ in rigs if m == n) for n, _ in rigs}
+    df = df.copy()
+    for n, p in rigs:
+        col = f"ltpr_vs_nc{n}" if per_n[n] == 1 else f"ltpr_vs_nc{n}_{p}px"
+        df[col] = np.where(lf, df["cameras.pixels"].astype(float) / p, np.nan)
+    return df
+
+
 def _write_table(rows, out: Path):
     import pandas as pd
 
     from mitpiv.io.atomic import atomic_path
 
-    df = pd.DataFrame(rows)
+    df = add_ltpr(pd.DataFrame(rows))
     with atomic_path(out / "results.csv") as tmp:
         df.to_csv(tmp, index=False)
     with atomic_path(out / "results.parquet") as tmp:

@@ -119,6 +119,9 @@ def test_lfpiv_velocity_error_grows_with_pmr(tmp_path):
     assert m[7]["evaluate"]["frame0"]["Q"] > m[28]["evaluate"]["frame0"]["Q"]
     # the same density per microlens: 16x the lenslets seed about 16x the particles
     assert 10 < m[7]["n_particles"] / m[28]["n_particles"] < 22
+    # the camera budget LTPR compares: one plenoptic camera of 384 x 384 px
+    assert m[7]["cameras"] == {"n": 1, "types": ["plenoptic"], "pixels": 384 * 384}
+    assert m[7].row()["cameras.pixels"] == 384 * 384 and m[7].row()["cameras.type"] == "plenoptic"
     # with both densities given, a pinhole density sensor takes ppp
     cfg = load_experiment(path, {**LF_SMALL, "seeding.density_sensor": "t0", "scene.params.tomo_resolution": 64})
     run_config(cfg, tmp_path, until="particles")
@@ -134,6 +137,8 @@ def test_more_tomographic_cameras_raise_q_at_high_density(tmp_path):
     q = {n: _small(path, {**ov, "render.sensors": [f"t{k}" for k in range(0, 8, 8 // n)]}, tmp_path / f"c{n}")
          for n in (4, 8)}
     assert q[8]["evaluate"]["frame0"]["Q"] > q[4]["evaluate"]["frame0"]["Q"] + 0.03
+    assert {n: (q[n]["cameras"]["n"], q[n]["cameras"]["pixels"]) for n in q} == {4: (4, 4 * 128**2), 8: (8, 8 * 128**2)}
+    assert "plenoptic" not in q[4]["cameras"]["types"]
     assert q[8]["evaluate"]["frame0"]["particles"]["u95_vox"][2] < q[4]["evaluate"]["frame0"]["particles"]["u95_vox"][2]
 
 
@@ -141,6 +146,33 @@ SA_SMALL = {"scene.params.resolution": 128, "seeding.box_min_mm": [-5.0, -5.0, -
             "seeding.box_max_mm": [5.0, 5.0, 2.0], "reconstruction.bounds_mm": [-5.0, 5.0, -5.0, 5.0, -2.0, 2.0],
             "reconstruction.voxel_mm": 0.1, "flow.ring_radius_mm": 2.0, "flow.core_radius_mm": 0.8, "flow.circulation_mm2_s": 300.0,
             "piv.windows": [16], "piv.overlap": 0.5}
+
+
+def test_sweep_table_gets_ltpr_per_rig():
+    """add_ltpr: Shi et al.'s Table 1 LTPRs from the camera budgets a sweep records (800 and
+    1600 px light-field cameras against 4, 6, 8 cameras of 160 px), checked against
+    mitpiv.physics.plenoptic.ltpr and the printed 6.25 / 4.17 / 3.13 / 25 / 16.67 / 12.5;
+    tomographic rows get no LTPR, and a table without camera budgets is left alone."""
+    import pandas as pd
+
+    from mitpiv.physics.plenoptic import ltpr
+    from mitpiv.studies.sweep import add_ltpr
+
+    rows = [{"point": f"lf{r}", "cameras.n": 1, "cameras.type": "plenoptic", "cameras.pixels": r * r} for r in (800, 1600)]
+    rows += [{"point": f"t{n}", "cameras.n": n, "cameras.type": "distorted_pinhole", "cameras.pixels": n * 160**2}
+             for n in (4, 6, 8)]
+    df = add_ltpr(pd.DataFrame(rows))
+    printed = {(800, 4): 6.25, (800, 6): 4.17, (800, 8): 3.13, (1600, 4): 25.0, (1600, 6): 16.67, (1600, 8): 12.5}
+    for (r, n), v in printed.items():
+        got = df.loc[df["point"] == f"lf{r}", f"ltpr_vs_nc{n}"].item()
+        assert got == pytest.approx(ltpr((r, r), (160, 160), n), rel=1e-12)
+        assert got == pytest.approx(v, abs=0.005)  # printed to two decimals
+    assert df.loc[df["point"].str.startswith("t"), [f"ltpr_vs_nc{n}" for n in (4, 6, 8)]].isna().all().all()
+    # two four-camera rigs of different sensors: the column names carry the pixels
+    two = add_ltpr(pd.DataFrame(rows[:1] + [{**rows[2], "cameras.pixels": 4 * 320**2}, rows[2]]))
+    assert {"ltpr_vs_nc4_102400px", "ltpr_vs_nc4_409600px"} <= set(two.columns)
+    bare = pd.DataFrame([{"point": "a", "frame0.Q": 0.5}])
+    assert add_ltpr(bare).equals(bare)
 
 
 def test_uncorrected_distortion_lowers_q(tmp_path):

@@ -472,7 +472,23 @@ def stage_render(ctx: StageContext) -> dict:
     finally:
         for f in links:
             f.unlink(missing_ok=True)
-    return {"images": [f.name for f in files]}
+    from mitpiv.io import read_exr
+
+    first = [f for f in files if Path(f).stem.endswith(f"_frame{FRAMES[0]:03d}")]
+    return {"images": [f.name for f in files], "cameras": camera_budget([read_exr(f)[1] for f in first])}
+
+
+def camera_budget(metas: list[dict]) -> dict:
+    """The cameras of one frame's images (their EXR metadata): how many, their types, and the
+    pixels they record together (the budget LTPR compares: for one plenoptic camera against
+    N_c tomographic ones, ``LTPR = pixels_LF / pixels_tomo``, Shi et al.'s
+    ``(p_x p_y)_LF / (p_x p_y N_c)_Tomo``, :func:`mitpiv.physics.plenoptic.ltpr`)."""
+    cams = [m.get("camera") or {} for m in metas]
+    res = [c.get("resolution") for c in cams]
+    if any(r is None or len(r) != 2 for r in res):
+        return {"n": len(cams), "types": sorted({str(c.get("type")) for c in cams}), "pixels": None}
+    return {"n": len(cams), "types": sorted({str(c.get("type")) for c in cams}),
+            "pixels": int(sum(int(r[0]) * int(r[1]) for r in res))}
 
 
 def images(run: Path, frame: int, source: str):
@@ -690,17 +706,23 @@ def stages(cfg) -> list[Stage]:
 def summary(cfg, results: dict) -> dict:
     """metrics.json of a tomo run: Q, particles per frame (``evaluate``), PIV errors (``piv``)."""
     return {"name": cfg.name, "seed": cfg.seed, "kind": "tomo", "evaluate": results.get("evaluate"),
-            "piv": results.get("piv"), "n_particles": (results.get("particles") or {}).get("n_particles")}
+            "piv": results.get("piv"), "n_particles": (results.get("particles") or {}).get("n_particles"),
+            "cameras": (results.get("render") or {}).get("cameras")}
 
 
 def row(metrics: dict) -> dict:
-    """The sweep-table columns of a tomo run: frame0.*, frame1.*, piv.*, n_particles."""
+    """The sweep-table columns of a tomo run: frame0.*, frame1.*, piv.*, n_particles, and
+    the camera budget (cameras.n, cameras.type, cameras.pixels) from which a sweep computes
+    LTPR (:func:`mitpiv.studies.sweep.add_ltpr`)."""
     from mitpiv.studies.sweep import flatten
 
     ev = metrics.get("evaluate") or {}
     out = {}
     flatten("", {"frame0": ev.get("frame0"), "frame1": ev.get("frame1"), "piv": metrics.get("piv"),
                  "n_particles": metrics.get("n_particles")}, out)
+    cams = metrics.get("cameras") or {}
+    out.update({"cameras.n": cams.get("n"), "cameras.type": "+".join(cams.get("types") or []) or None,
+                "cameras.pixels": cams.get("pixels")})
     return out
 
 
