@@ -545,3 +545,9 @@ def flow_from_dict(d: dict) -> Flow:
     if kind not in _KINDS:
         raise ConfigError(f"flow: unknown kind {kind!r}; known: {sorted(_KINDS)}.")
     return _KINDS[kind](**d)
+
+
+# the turbulent near-field round jet lives in its own module (it imports Flow and FLOW_KINDS
+# from here and registers itself as "near_field_jet"); imported last, so either import order
+# finds the other complete enough
+import mitpiv.physics.jet  # noqa: E402, F401

@@ -272,3 +272,36 @@ def test_default_experiment_matches_the_scene_particles(tmp_path):
 
 
 # the killed-worker sweep test is in test_faults.py (a worker killed by its PID mid-point)
+
+
+def test_near_field_jet_is_a_flow_kind(tmp_path):
+    """[flow] kind = "near_field_jet" (mitpiv.physics.jet.NearFieldJet, the lfpiv-vs-tomo
+    replication's turbulent jet) configures an experiment: the particles move by the jet's
+    velocity (mean shear plus synthetic turbulence: the experiment's 8 substeps against a
+    64-step RK4 path, within 1e-4 of the displacement), and the truth file's flow rebuilds the same
+    jet. A parameter of another flow kind is refused by name."""
+    from mitpiv.io import read_truth
+    from mitpiv.physics.flows import flow_from_dict
+    from mitpiv.physics.jet import NearFieldJet
+    from mitpiv.studies.runner import load_experiment, run_config
+
+    jet = BASE.replace('kind = "uniform"\nvelocity_mm_s = [100.0, 0.0, 0.0]',
+                       'kind = "near_field_jet"\ndiameter_mm = 10.0\nexit_velocity_mm_s = 200.0\n'
+                       'nozzle_mm = [-10.0, 5.0, 0.0]\nseed = 4')
+    cfg = load_experiment(write(tmp_path, jet))
+    run_config(cfg, tmp_path / "run", until="particles")
+    t = read_truth(tmp_path / "run" / "particles" / "truth.npz")
+    p0, p1 = t["positions_mm"]
+    ref = NearFieldJet(10.0, 200.0, nozzle_mm=(-10.0, 5.0, 0.0), seed=4)
+    q, h = p0.copy(), 0.002 / 64  # the reference path: classical RK4, 64 steps
+    for _ in range(64):
+        k1 = ref(q)
+        k2 = ref(q + 0.5 * h * k1)
+        k3 = ref(q + 0.5 * h * k2)
+        q = q + h / 6 * (k1 + 2 * k2 + 2 * k3 + ref(q + h * k3))
+    disp = p1 - p0
+    assert np.linalg.norm(disp - (q - p0)) < 1e-4 * np.linalg.norm(disp)  # measured 1.6e-6
+    assert disp[:, 0].max() > 0.3 and np.std(disp[:, 1]) > 0.01  # sheared and turbulent, not uniform
+    np.testing.assert_allclose(flow_from_dict(t["flow"])(p0), ref(p0), rtol=1e-12, atol=1e-9)
+    with pytest.raises(ConfigError, match="velocity_mm_s"):
+        load_experiment(write(tmp_path, jet.replace("seed = 4", "seed = 4\nvelocity_mm_s = [1.0, 0.0, 0.0]"), "bad.toml"))
