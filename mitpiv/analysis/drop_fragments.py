@@ -339,8 +339,13 @@ def velocity_sd_for_model_error(we: int, tau: float, sd_mm: float, *, dt_s: floa
         raise ConfigError(f"velocity_sd_for_model_error: sd_mm = {sd_mm!r} mm is at or below the {axis} model error of the "
                           f"crown model without scatter ({floor:.4g} mm at We {we}, tau {tau}); ask for more than that.")
     hi = 4.0 * sd_mm / dt_s
-    while sd_of(hi) < sd_mm:  # the fit absorbs a fraction < 1 of the scatter: widen until bracketed
+    for _ in range(20):  # the fit absorbs a fraction < 1 of the scatter: widen until bracketed
+        if sd_of(hi) >= sd_mm:
+            break
         hi *= 2.0
+    else:
+        raise ConfigError(f"velocity_sd_for_model_error: no scatter up to {hi:.3g} mm/s gives a {axis} model error of "
+                          f"{sd_mm!r} mm at We {we}, tau {tau}; check sd_mm and dt_s.")
     return float(brentq(lambda v: sd_of(v) - sd_mm, 0.0, hi, xtol=0.1))
 
 

@@ -361,16 +361,20 @@ def assign(a, b, radius: float, *, tiebreak=None) -> np.ndarray:
     """Minimum-total-distance one-to-one assignment between point sets a (N, d) and b
     (M, d) among pairs closer than ``radius``; returns (K, 2) index pairs.
 
-    Each point may stay unmatched at a cost of ``radius``, so the assignment matches as
-    many pairs as the radius allows and, among those, minimises the summed distance
-    (a sparse minimum-weight bipartite matching, not a greedy nearest-neighbour pass).
+    Each point may stay unmatched at a cost of ``radius``: the assignment minimises the
+    summed distance of its pairs plus ``radius`` per unmatched point (a sparse
+    minimum-weight bipartite matching, not a greedy nearest-neighbour pass). Any single
+    extra pair within the radius is taken; a chain of pairs (a, b), (a', b'), ... that
+    could be rearranged into one more pair only at more total distance than the two
+    unmatched points cost may leave those points unmatched.
 
     tiebreak : optional pair ``(ta, tb)`` of (N, k) and (M, k) coordinates whose distance
-        is added to the cost of each candidate pair but takes no part in the gate: among
-        the pairs within ``radius`` it prefers those close in these coordinates too (e.g.
-        depth, when the gate is in the image plane only), without dropping any pair for
-        them (the unmatched cost grows by their largest candidate distance, so the number
-        of pairs is still the largest the gate allows).
+        is added to the cost of each candidate pair but takes no part in the gate (e.g.
+        depth, when the gate is in the image plane only). Then the number of pairs is the
+        largest the gate allows (a maximum-cardinality matching: the unmatched cost exceeds
+        half of ``min(N, M)`` times the largest pair cost, more than any rearrangement that
+        adds a pair can cost), and among the matchings of that size the one of least summed
+        (distance + tie-break distance) is taken.
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import min_weight_full_bipartite_matching
@@ -388,10 +392,10 @@ def assign(a, b, radius: float, *, tiebreak=None) -> np.ndarray:
     if tiebreak is not None:
         ta = np.asarray(tiebreak[0], dtype=np.float64).reshape(n, -1)
         tb = np.asarray(tiebreak[1], dtype=np.float64).reshape(m, -1)
-        extra = np.linalg.norm(ta[r] - tb[c], axis=1)
-        w = w + extra
-        miss += float(extra.max())
-    eps = 1e-9 * miss
+        w = w + np.linalg.norm(ta[r] - tb[c], axis=1)
+        # an augmenting path adds k + 1 <= min(n, m) pairs and frees two unmatched points
+        miss = float(radius) + 0.5 * min(n, m) * float(w.max())
+    eps = 1e-9 * float(radius)
     # rows: found (n) + dummies of truth (m); cols: truth (m) + dummies of found (n)
     rows = np.concatenate([r, np.arange(n), n + np.arange(m), n + c])
     cols = np.concatenate([c, m + np.arange(n), np.arange(m), m + r])

@@ -148,7 +148,7 @@ def add_ltpr(df):
     need = {"cameras.n", "cameras.type", "cameras.pixels"}
     if not need <= set(df.columns):
         return df
-    ok = df["cameras.pixels"].notna() & df["cameras.n"].notna()
+    ok = df["cameras.pixels"].notna() & df["cameras.n"].notna() & df["cameras.type"].notna()
     lf = ok & (df["cameras.type"] == "plenoptic") & (df["cameras.n"] == 1)
     tomo = ok & ~df["cameras.type"].fillna("").str.contains("plenoptic") & (df["cameras.n"] > 1)
     if not (lf.any() and tomo.any()):

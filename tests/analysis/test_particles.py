@@ -142,10 +142,11 @@ def test_assignment_is_the_optimal_one_to_one_matching():
 
 
 def test_assignment_tiebreak_chooses_but_never_gates():
-    """With a tie-break coordinate, the number of pairs is still the largest the gate
-    allows (checked against the brute-force maximum), and among the largest matchings the
-    one of least summed (gate + tie-break) cost is chosen (brute force over permutations);
-    a tie-break distance however large rejects no pair."""
+    """With a tie-break coordinate, the number of pairs is the largest the gate allows
+    (checked against the brute-force maximum, and on a chain where a cheaper matching has
+    one pair fewer), and among the largest matchings the one of least summed (gate +
+    tie-break) cost is chosen (brute force over permutations); a tie-break distance however
+    large rejects no pair."""
     import itertools
 
     rng = np.random.default_rng(5)
@@ -167,6 +168,11 @@ def test_assignment_tiebreak_chooses_but_never_gates():
                 break
         assert len(pairs) == best_k
         assert C[pairs[:, 0], pairs[:, 1]].sum() == pytest.approx(best_cost, abs=1e-6)
+    # a chain (found 0.6 apart, truth shifted by 0.6, radius 1): three pairs exist; depths
+    # that favour the two shifted pairs must not cost the third
+    f = np.array([[0.0, 0.0], [0.6, 0.0], [1.2, 0.0]])
+    pairs = assign(f, f + [0.6, 0.0], 1.0, tiebreak=(np.array([[0.0], [10.0], [20.0]]), np.array([[10.0], [20.0], [30.0]])))
+    assert len(pairs) == 3
     # two detections at the same image position, two particles behind each other: depth picks
     a = np.zeros((2, 2))
     pairs = assign(a, a + 0.01, R, tiebreak=(np.array([[0.0], [9.0]]), np.array([[10.0], [1.0]])))

@@ -23,6 +23,8 @@ report). The DIH beam travels along +z to a sensor behind the splash.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import shutil
 import tempfile
@@ -251,8 +253,8 @@ def _fragments(item: dict) -> dict:
 
 
 #: Frame-to-frame matching radius [mm] of the first pass (nearest neighbour in 3D, no
-#: predictor): the drop fragments move 0.2-0.6 mm in 150 us, so this pass pairs the slow
-#: majority and misses the fast ones; it only seeds the predictor of the second pass
+#: predictor): the drop fragments move 0.2-1 mm in 150 us, so this pass pairs only the
+#: slower ones; it only seeds the predictor of the second pass
 MATCH_RADIUS_MM = 0.6
 #: Matching radius [mm] about the predicted position (second pass): 3x the largest z model
 #: error of Table 2 (0.445 mm), so that the pairing does not truncate the scatter the model
@@ -356,7 +358,8 @@ def plenoptic_point(item: dict) -> dict:
     truth_of = np.full(len(dets[0]), -1)
     truth_of[ev["pairs"][:, 0]] = ev["pairs"][:, 1]
     out.update(matched_truth_d_mm=d_vis[ev["pairs"][:, 1]].tolist(),
-               depth_error_mm=(ev["depth_error_diameters"] * d_vis[ev["pairs"][:, 1]]).tolist())
+               depth_error_mm=(ev["depth_error_diameters"] * d_vis[ev["pairs"][:, 1]]).tolist(),
+               matched_isolated=isolated(p0[vis], d_vis)[ev["pairs"][:, 1]].tolist())
     if len(dets[1]) == 0:
         return out
     out.update(_pairs(dets, truth_of, disp_vis))
@@ -399,6 +402,7 @@ def dih_point(item: dict) -> dict:
            "depth_median_abs_d": _nan(ev["depth_median_abs_diameters"]), "depth_rms_d": _nan(ev["depth_rms_diameters"]),
            "size_bias_mm": _nan(ev["size_bias_mm"]), "size_rms_mm": _nan(ev["size_rms_mm"]),
            "matched_d_mm": d_in[ev["pairs"][:, 1]].tolist(), "depth_error_d": ev["depth_error_diameters"].tolist(),
+           "matched_isolated": isolated(p0[inside], d_in)[ev["pairs"][:, 1]].tolist(),
            "size_error_mm": ev["size_error_mm"].tolist(), "diameters_mm": (dets[0].diameters_mm.tolist() if len(dets[0]) else [])}
     if len(dets[0]) == 0 or len(dets[1]) == 0:
         return out
@@ -561,10 +565,31 @@ def _pool(results: list[dict], key: str, width: int = 0) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros((0, width) if width else (0,))
 
 
-#: A pair whose displacement error in the image plane (x, y) exceeds this [mm] pairs two
-#: different fragments: a right pair's in-plane error is ~0.01 mm (median), a fragment's
-#: diameter 0.1-0.3 mm
+#: A pair whose displacement error in the image plane (x, y) exceeds this [mm] is wrong:
+#: it joins two different fragments, or its first detection was credited to a neighbouring
+#: fragment (a right pair's in-plane error is ~0.01 mm, median; a fragment 0.1-0.3 mm)
 WRONG_PAIR_MM = 0.2
+
+
+def isolated(positions_mm, diameters_mm, radius_diameters: float = 1.5) -> np.ndarray:
+    """Per fragment: no other within ``radius_diameters`` median diameters in the image
+    plane (x, y; the camera looks along z). The others' detections the truth evaluation
+    (:func:`~mitpiv.analysis.backlit.evaluate_detections`) cannot attribute by the image
+    alone; it attributes them by depth, to the nearer in depth (a lower bound of their
+    depth error), so the depth statistics are also given over the isolated ones."""
+    from scipy.spatial import cKDTree
+
+    p = np.asarray(positions_mm, dtype=np.float64).reshape(-1, 3)
+    if len(p) < 2:
+        return np.ones(len(p), bool)
+    pairs = cKDTree(p[:, :2]).query_pairs(radius_diameters * float(np.median(diameters_mm)), output_type="ndarray")
+    return ~np.isin(np.arange(len(p)), pairs.ravel())
+
+
+def overlap_share(positions_mm, diameters_mm, radius_diameters: float = 1.5) -> float:
+    """The share of fragments that are not :func:`isolated`."""
+    iso = isolated(positions_mm, diameters_mm, radius_diameters)
+    return float(1.0 - iso.mean()) if iso.size else 0.0
 
 
 def _condition_stats(results: list[dict], we: int, suffix: str = "") -> dict:
@@ -581,6 +606,7 @@ def _condition_stats(results: list[dict], we: int, suffix: str = "") -> dict:
     sz = me["z"]["sd_mm"] if me else math.nan
     d = _pool(results, "diameters_mm")
     e = _pool(results, f"disp_error_mm{suffix}", 3)
+    de, iso = _pool(results, "depth_error_mm"), _pool(results, "matched_isolated")  # (runs before it: no flags)
     vel = disp / DT_DROP_S
     rad = np.hypot(p[:, 0], p[:, 2])
     ok = rad > 0
@@ -597,6 +623,9 @@ def _condition_stats(results: list[dict], we: int, suffix: str = "") -> dict:
             "truth_sd_dx": sd(e[:, 0]), "truth_sd_dz": sd(e[:, 2]), "truth_rsd_dx": rsd(e[:, 0]),
             "wrong_pairs": float(np.mean(np.hypot(e[:, 0], e[:, 1]) > WRONG_PAIR_MM)) if len(e) else math.nan,
             "truth_rsd_dz": rsd(e[:, 2]), "depth_rsd_mm": rsd(_pool(results, "depth_error_mm")), "n_truth_pairs": int(len(e)),
+            "depth_rsd_iso_mm": rsd(de[iso > 0]) if iso.size == de.size else math.nan,
+            "depth_sd_iso_mm": sd(de[iso > 0]) if iso.size == de.size else math.nan,
+            "n_iso": int(np.sum(iso > 0)) if iso.size == de.size else 0,
             "vr_over_v0": mean(vr) / v0, "vr_sd_over_v0": sd(vr) / v0,
             "truth_vr_over_v0": mean(_pool(results, "truth_vr_mm_s")) / v0,
             "abs_vx_over_v0": mean(np.abs(vel[:, 0])) / v0, "abs_vz_over_v0": mean(np.abs(vel[:, 2])) / v0,
@@ -647,11 +676,16 @@ def run(ctx) -> ReplicationResult:
                 f"_k1{it['k1']}_aim{it['aim_mm'][0]}_{it['aim_mm'][1]}_n{it['n_fragments']}_vsd{it['velocity_sd_mm_s']:.0f}")
 
     card = sc["card"]
-    cal_item = {**items[0], **card}  # the camera's: its key names the camera and cards, not the fragments
-    cal = ctx.cached(f"dewarp3_s{ctx.seed}_crop{cal_item['crop_px'][0]}x{cal_item['crop_px'][1]}_pl{cal_item['planes']}"
+    # the camera's dewarp: its key names the camera, the cards and the noise stream (drawn
+    # under the first condition's tag), not the fragments
+    cal_item = {**items[0], **card}
+    depths_tag = hashlib.sha1(json.dumps([float(v) for v in card["card_depths_mm"]]).encode()).hexdigest()[:8]
+    cal = ctx.cached(f"dewarp4_s{ctx.seed}_{cal_item['we']}_{cal_item['tau']}_r{cal_item['realisation']}"
+                     f"_crop{cal_item['crop_px'][0]}x{cal_item['crop_px'][1]}_pl{cal_item['planes']}"
                      f"_a{cal_item['alpha_range'][0]}_{cal_item['alpha_range'][1]}_spp{cal_item['spp']}_k1{cal_item['k1']}"
                      f"_aim{cal_item['aim_mm'][0]}_{cal_item['aim_mm'][1]}_card{card['card_pitch_mm']}_{card['card_dot_mm']}"
-                     f"_{len(card['card_depths_mm'])}d_{card['card_planes']}pl", lambda: calibration_point(cal_item))
+                     f"_h{card['card_half_range_mm']}_{len(card['card_depths_mm'])}d{depths_tag}_{card['card_planes']}pl",
+                     lambda: calibration_point(cal_item))
     items = [{**it, "dewarp": {k: cal[k] for k in ("coef", "degree", "centre", "scale", "rms_mm")}} for it in items]
     plen = ctx.map(plenoptic_point, items, key=lambda it: f"{key(it)}_card{card['card_pitch_mm']}_{len(card['card_depths_mm'])}d",
                    desc="plenoptic realisations")
@@ -671,7 +705,8 @@ def run(ctx) -> ReplicationResult:
     shock_item = {"seed": ctx.seed, "n": sc["pellets"], "dih_px": sc["dih_px"][0]}
     shock = ctx.cached(f"shock2_s{ctx.seed}_n{shock_item['n']}_px{shock_item['dih_px']}", lambda: dih_shock_point(shock_item))
     tim_item = {k: items[0][k] for k in ("crop_px", "planes", "alpha_range", "k1", "aim_mm")}
-    timing = ctx.cached(f"stacktime1_crop{tim_item['crop_px'][0]}x{tim_item['crop_px'][1]}_pl{tim_item['planes']}",
+    timing = ctx.cached(f"stacktime2_crop{tim_item['crop_px'][0]}x{tim_item['crop_px'][1]}_pl{tim_item['planes']}"
+                        f"_a{tim_item['alpha_range'][0]}_{tim_item['alpha_range'][1]}_ss{SUPERSAMPLE}",
                         lambda: stack_timing_point(tim_item))
     fb_item = sc["focus_bias"]
     fbias_at = fb_item["distance_mm"]
@@ -692,6 +727,7 @@ def run(ctx) -> ReplicationResult:
         me_t = model_error(tp, tdisp)
         resid = tdisp - linear_predictor(tp, tdisp, tp)  # what the second matching pass must reach
         truth_me[c] = {"sx": me_t["x"]["sd_mm"], "sz": me_t["z"]["sd_mm"], "vsd": vsd[c],
+                       "overlap": float(np.mean([overlap_share(f["positions_mm"], f["diameters_mm"]) for f in fs])),
                        "beyond_first": float(np.mean(np.linalg.norm(tdisp, axis=1) > MATCH_RADIUS_MM)),
                        "beyond_radius": float(np.mean(np.linalg.norm(resid, axis=1) > PREDICTOR_RADIUS_MM))}
     ref = stats[(784, 5.1)]
@@ -773,7 +809,16 @@ def run(ctx) -> ReplicationResult:
     dih_matched = sum(r["n_matched"] for r in dih)
     dih_vis = sum(r["n_truth_visible"] for r in dih)
     dih_beyond = sum(r.get("n_truth_beyond_range", 0) for r in dih)
+    dih_overlap = []
+    for it in dih_items:  # the fragments in the DIH crop that overlap another along the beam
+        f = _fragments(it)
+        half = np.asarray(it["dih_px"]) * DIH_PIXEL_UM * 1e-3 / 2
+        inside = np.all(np.abs(f["positions_mm"][:, :2] - np.asarray(it["dih_aim_mm"])) < half, axis=1)
+        dih_overlap.append(overlap_share(f["positions_mm"][inside], f["diameters_mm"][inside]))
     dz_mm = ed * md
+    iso_d = _pool(dih, "matched_isolated")
+    dz_iso = dz_mm[iso_d > 0] if iso_d.size == dz_mm.size else np.zeros(0)
+    rsd_iso = float(1.4826 * np.median(np.abs(dz_iso - np.median(dz_iso)))) if dz_iso.size >= 3 else math.nan
     dih_rsd_over_d = (float(1.4826 * np.median(np.abs(dz_mm - np.median(dz_mm))) / md.mean()) if md.size >= 3
                       else math.nan)
     dih_size_err = _pool(dih, "size_error_mm")
@@ -803,7 +848,7 @@ def run(ctx) -> ReplicationResult:
         compare_value("model_err_x_mm_we784_tau5.1", "s.d. of the x model error", "Fig. 25, Table 2",
                       PAPER["model_err_x_mm"], sx, unit="mm", rel=0.3, why="condition-to-condition spread of Table 2",
                       note=f"{scale_note}; {ref['n_pairs']} matched pairs ({100 * _num(ref['wrong_pairs']):.0f} % of "
-                           f"those checked against the truth pair two different fragments); {flow_note}, so this row "
+                           f"those checked against the truth wrong); {flow_note}, so this row "
                            "checks that our x "
                            f"measurement adds little (true x displacement error s.d. {_num(ref['truth_sd_dx']):.3f} mm). "
                            f"The true field's model error is x {truth_me[(784, 5.1)]['sx']:.3f}, z "
@@ -829,7 +874,13 @@ def run(ctx) -> ReplicationResult:
                       note=f"{scale_note}; {ref['n_truth_pairs']} pairs matched to the truth; compare with the two "
                            "estimates above: the better estimator is the one closer to this. Robust s.d. (1.4826 MAD, "
                            f"the Gaussian core without the wrong pairs) {_num(ref['truth_rsd_dz']):.3f} mm; per position, "
-                           f"the depth error's robust s.d. is {_num(ref['depth_rsd_mm']):.3f} mm"),
+                           f"the depth error's robust s.d. is {_num(ref['depth_rsd_mm']):.3f} mm. "
+                           f"{100 * truth_me[(784, 5.1)]['overlap']:.0f} % of the fragments overlap another in the image "
+                           "(within 1.5 median diameters): their detections are credited to the one nearer in depth, "
+                           "a lower bound of their error"
+                           + (f"; over the isolated ones ({ref['n_iso']}) the depth error's s.d. is "
+                              f"{_num(ref['depth_sd_iso_mm']):.3f} mm, robust {_num(ref['depth_rsd_iso_mm']):.3f} mm"
+                              if ref["n_iso"] else "; the cached points predate the isolation flags")),
         compare_trend("plen_true_dx_disp_sd_mm_we784_tau5.1", "true s.d. of the x displacement error (against the "
                       "truth)", "Sec. VI.A.1", "negligible ('assuming negligible uncertainty in the x direction')",
                       ref["truth_sd_dx"], bool(ref["truth_sd_dx"] < 0.25 * PAPER["model_err_x_mm"]), unit="mm",
@@ -849,10 +900,14 @@ def run(ctx) -> ReplicationResult:
                       "[27] via Sec. VI.A.1", 0.72, dih_sd_over_d, rel=0.5,
                       why="[27]: 'approximately 0.7', from velocity symmetry over many realisations",
                       note=f"{scale_note}; against the truth (depth choosing among fragments that overlap in the "
-                           f"image): {dih_matched} of {dih_vis} fragments matched over {len(dih)} realisation(s) "
+                           f"image, {100 * _num(np.mean(dih_overlap) if dih_overlap else None):.0f} % of those in the "
+                           f"crop, a lower bound of their error): {dih_matched} of {dih_vis} fragments matched over {len(dih)} realisation(s) "
                            f"({dih_beyond} of them beyond the reconstructed depths), median |dz| "
                            f"{_num(np.median(np.abs(ed)) if ed.size else None):.2f} d, robust s.d. "
-                           f"{_num(dih_rsd_over_d):.2f} d (1.4826 MAD, the Gaussian core), "
+                           f"{_num(dih_rsd_over_d):.2f} d (1.4826 MAD, the Gaussian core); over the {dz_iso.size} "
+                           f"isolated fragments s.d. {_num(np.std(dz_iso, ddof=1) / md.mean() if dz_iso.size >= 3 else None):.2f}"
+                           f" d, robust {_num(rsd_iso / md.mean() if md.size else None):.2f} d, median |dz| "
+                           f"{_num(np.median(np.abs(dz_iso)) / md.mean() if dz_iso.size else None):.2f} d; "
                            f"size bias {1e3 * _num(dih_size_err.mean() if dih_size_err.size else None):+.0f} um; eq. 23 at "
                            f"{DIH_WAVELENGTH_NM:.0f} nm puts the depth resolution of a 0.1 mm droplet at "
                            f"{float(dih_depth_resolution(0.1, DIH_WAVELENGTH_NM)):.0f} mm"),
@@ -906,7 +961,7 @@ def run(ctx) -> ReplicationResult:
             continue
         st = stats.get((we, tau), {"sx": math.nan, "sz": math.nan, "n_pairs": 0})
         note = (f"{scale_note}; {st['n_pairs']} matched pairs, {100 * _num(st.get('wrong_pairs')):.0f} % of those "
-                f"checked against the truth pair two different fragments; the true field's model error (no imaging): x "
+                f"checked against the truth wrong; the true field's model error (no imaging): x "
                 f"{truth_me[(we, tau)]['sx']:.3f}, z {truth_me[(we, tau)]['sz']:.3f} mm; "
                 f"scatter put in {truth_me[(we, tau)]['vsd'] * DT_DROP_S:.3f} mm over 150 us; "
                 f"{100 * truth_me[(we, tau)]['beyond_first']:.0f} % of the true displacements exceed the first pass's "
@@ -959,7 +1014,7 @@ def run(ctx) -> ReplicationResult:
         "the size law is a placeholder (below). Raw images decoded "
         f"{SUPERSAMPLE}x supersampled and refocused into stacks of {sc['planes']} planes evenly spaced in alpha over "
         f"{sc['alpha_range']} (one stack of the {timing['shape'][2]} x {timing['shape'][1]} px refocused grid: decode "
-        f"{timing['decode_s']:.1f} s, {timing['planes']} planes {timing['stack_s']:.1f} s, measured in the run); the "
+        f"{timing['decode_s']:.1f} s, {timing['planes']} planes {timing['stack_s']:.1f} s, measured when its cache entry was made); the "
         "hybrid detection; the dot-card dewarp (rendered cards at "
         f"{len(card['card_depths_mm'])} depths every 2.5 mm, {card['card_dot_mm']} mm dots at {card['card_pitch_mm']} mm "
         "pitch, each refocused into its own stack, dots located by their sharpest plane, second-order polynomial in "
@@ -997,8 +1052,9 @@ def run(ctx) -> ReplicationResult:
         "from the model at tau 5.1. Early, the scatter nears the fragments' spacing and a pair can join two "
         "fragments: "
         + ", ".join(f"{100 * _num(stats[c]['wrong_pairs']):.0f} %" for c in conds)
-        + f" of the truth-checked pairs do (conditions as in the method, in-plane error > {WRONG_PAIR_MM} mm), which "
-        "raises the measured model errors above the flow's at early tau.\n"
+        + f" of the truth-checked pairs are wrong (conditions as in the method; in-plane displacement error > "
+        f"{WRONG_PAIR_MM} mm: two fragments joined, or the first detection credited to a neighbour), which raises the "
+        "measured model errors above the flow's at early tau.\n"
         f"- With the flow's x model error an input (0.263 mm), ours measures {sx:.3f} mm: the true x displacement "
         f"error ({_num(ref['truth_sd_dx']):.3f} mm s.d., robust {_num(ref['truth_rsd_dx']):.3f} mm) is what the "
         "paper assumed negligible.",
