@@ -692,7 +692,7 @@ def run(ctx) -> ReplicationResult:
     dih_items = [{**it, "dih_px": list(sc["dih_px"]), "dih_planes": sc["dih_planes"],
                   "dih_half_range_mm": sc["dih_half_range_mm"], "dih_aim_mm": list(sc["dih_aim_mm"])}
                  for it in items if (it["we"], it["tau"]) == (784, 5.1)]
-    dih = ctx.map(dih_point, dih_items, key=lambda it: (f"dih5_{key(it)}_px{it['dih_px'][0]}_pl{it['dih_planes']}"
+    dih = ctx.map(dih_point, dih_items, key=lambda it: (f"dih6_{key(it)}_px{it['dih_px'][0]}_pl{it['dih_planes']}"
                                                 f"_zr{it['dih_half_range_mm']}"
                                                 f"_at{it['dih_aim_mm'][0]}_{it['dih_aim_mm'][1]}"),
                   desc="DIH realisations")
