@@ -20,7 +20,7 @@ from mitpiv.io.calibration_tables import (
     write_polynomial_table,
 )
 from mitpiv.io.camera import camera_from_metadata
-from mitpiv.io.exr import read_exr, write_exr
+from mitpiv.io.exr import read_exr, read_exr_metadata, write_exr
 from mitpiv.io.figures import save_figure
 from mitpiv.io.lightfield import read_lightfield, write_lightfield
 from mitpiv.io.opencv import read_opencv_camera, write_opencv_camera
@@ -29,7 +29,7 @@ from mitpiv.io.records import read_json, to_jsonable, write_json, write_text
 from mitpiv.io.vectors import read_vector_field, write_vector_field
 from mitpiv.io.volume import read_volume, write_volume
 
-__all__ = ["read_exr", "write_exr", "write_particles_ply", "read_particles_ply", "write_truth", "read_truth",
+__all__ = ["read_exr", "read_exr_metadata", "write_exr", "write_particles_ply", "read_particles_ply", "write_truth", "read_truth",
            "read_volume", "write_volume", "camera_from_metadata", "write_npz", "read_npz", "write_dewarp",
            "read_dewarp", "write_detections", "read_detections", "write_lightfield", "read_lightfield", "write_json",
            "read_json", "write_text", "to_jsonable", "write_vector_field", "read_vector_field", "save_figure",

@@ -16,7 +16,7 @@ from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.io.atomic import atomic_path
 from mitpiv.io.records import json_default
 
-__all__ = ["write_exr", "read_exr", "METADATA_KEY"]
+__all__ = ["write_exr", "read_exr", "read_exr_metadata", "METADATA_KEY"]
 
 METADATA_KEY = "mitpiv"
 
@@ -64,6 +64,43 @@ def write_exr(path, image, metadata: dict | None = None) -> Path:
     return path
 
 
+def _check_exr(path: Path, owner: str) -> None:
+    if not path.is_file():
+        raise FileFormatError(f"{owner}: {str(path)!r} does not exist.")
+    with open(path, "rb") as fh:
+        head = fh.read(4)
+    if head != b"\x76\x2f\x31\x01":  # the OpenEXR magic number 20000630
+        what = "the file is empty, not a readable EXR file" if not head else \
+            f"it is not a readable EXR file (it starts with {head!r})"
+        raise FileFormatError(f"{owner}: {str(path)!r}: {what}; expected a float32 OpenEXR image (.exr).")
+
+
+def _metadata(meta, path: Path, owner: str) -> dict:
+    if meta is None:
+        return {}
+    if isinstance(meta, bytes):
+        meta = meta.decode()
+    try:
+        return json.loads(meta)
+    except json.JSONDecodeError as e:
+        raise FileFormatError(f"{owner}: metadata in {str(path)!r} is not valid JSON ({e}).") from None
+
+
+def read_exr_metadata(path) -> dict:
+    """The mitpiv metadata of an EXR file, from its header alone (no pixels read): the
+    dict :func:`read_exr` returns beside the image ({} for files of other software)."""
+    import OpenEXR
+
+    path = Path(path)
+    _check_exr(path, "read_exr_metadata")
+    try:
+        with OpenEXR.File(str(path), header_only=True) as f:
+            meta = f.header().get(METADATA_KEY)
+    except Exception as e:  # OpenEXR raises plain exceptions for corrupt files
+        raise FileFormatError(f"read_exr_metadata: {str(path)!r} is not a readable EXR file ({e}).") from None
+    return _metadata(meta, path, "read_exr_metadata")
+
+
 def read_exr(path) -> tuple[np.ndarray, dict]:
     """Read an EXR file: (image float32 (H, W) or (H, W, C), metadata dict).
 
@@ -72,14 +109,7 @@ def read_exr(path) -> tuple[np.ndarray, dict]:
     import OpenEXR
 
     path = Path(path)
-    if not path.is_file():
-        raise FileFormatError(f"read_exr: {str(path)!r} does not exist.")
-    with open(path, "rb") as fh:
-        head = fh.read(4)
-    if head != b"\x76\x2f\x31\x01":  # the OpenEXR magic number 20000630
-        what = "the file is empty, not a readable EXR file" if not head else \
-            f"it is not a readable EXR file (it starts with {head!r})"
-        raise FileFormatError(f"read_exr: {str(path)!r}: {what}; expected a float32 OpenEXR image (.exr).")
+    _check_exr(path, "read_exr")
     try:
         with OpenEXR.File(str(path)) as f:
             meta = f.header().get(METADATA_KEY)
@@ -93,11 +123,4 @@ def read_exr(path) -> tuple[np.ndarray, dict]:
     else:
         keys = sorted(channels, key=lambda k: (len(k), k))
         img = np.stack([channels[k] if channels[k].ndim == 2 else channels[k][..., 0] for k in keys], axis=-1)
-    if meta is None:
-        return img, {}
-    if isinstance(meta, bytes):
-        meta = meta.decode()
-    try:
-        return img, json.loads(meta)
-    except json.JSONDecodeError as e:
-        raise FileFormatError(f"read_exr: metadata in {str(path)!r} is not valid JSON ({e}).") from None
+    return img, _metadata(meta, path, "read_exr")

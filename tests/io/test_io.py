@@ -4,7 +4,15 @@ import numpy as np
 import pytest
 
 from mitpiv.errors import ConfigError, FileFormatError
-from mitpiv.io import read_exr, read_particles_ply, read_truth, write_exr, write_particles_ply, write_truth
+from mitpiv.io import (
+    read_exr,
+    read_exr_metadata,
+    read_particles_ply,
+    read_truth,
+    write_exr,
+    write_particles_ply,
+    write_truth,
+)
 
 
 def test_exr_round_trip_with_metadata(tmp_path):
@@ -17,6 +25,9 @@ def test_exr_round_trip_with_metadata(tmp_path):
     rgb = np.random.default_rng(1).random((4, 5, 3)).astype(np.float32)
     write_exr(tmp_path / "c.exr", rgb, {})
     np.testing.assert_array_equal(read_exr(tmp_path / "c.exr")[0], rgb)
+    # the header alone gives the same metadata
+    assert read_exr_metadata(tmp_path / "a.exr") == m
+    assert read_exr_metadata(tmp_path / "c.exr") == {}
 
 
 def test_exr_bad_input_writes_nothing(tmp_path):
@@ -45,6 +56,10 @@ def test_read_exr_errors(tmp_path):
     (tmp_path / "junk.exr").write_bytes(b"not an exr")
     with pytest.raises(FileFormatError, match="not a readable EXR"):
         read_exr(tmp_path / "junk.exr")
+    with pytest.raises(FileFormatError, match="read_exr_metadata: .*not a readable EXR"):
+        read_exr_metadata(tmp_path / "junk.exr")
+    with pytest.raises(FileFormatError, match="read_exr_metadata: .*does not exist"):
+        read_exr_metadata(tmp_path / "none.exr")
 
 
 def test_ply_round_trip(tmp_path):

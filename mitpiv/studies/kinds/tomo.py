@@ -472,10 +472,10 @@ def stage_render(ctx: StageContext) -> dict:
     finally:
         for f in links:
             f.unlink(missing_ok=True)
-    from mitpiv.io import read_exr
+    from mitpiv.io import read_exr_metadata
 
     first = [f for f in files if Path(f).stem.endswith(f"_frame{FRAMES[0]:03d}")]
-    return {"images": [f.name for f in files], "cameras": camera_budget([read_exr(f)[1] for f in first])}
+    return {"images": [f.name for f in files], "cameras": camera_budget([read_exr_metadata(f) for f in first])}
 
 
 def camera_budget(metas: list[dict]) -> dict:
