@@ -505,8 +505,10 @@ def dih_focus_bias_point(item: dict) -> dict:
     keys = ("hybrid", "sharp_intensity", "min_intensity", "sharp_complex", "min_complex")
     out = {"d_mm": list(item["d_mm"]), **{f"{k}_err_mm": [] for k in keys}}
     for d in item["d_mm"]:
-        t = 1.0 - np.clip((d / 2 - r) / px + 0.5, 0.0, 1.0)  # the disc, edge pixels by area, centred on the grid
-        u = holography.propagate(t.astype(np.complex128), dist, pixel_um=DIH_PIXEL_UM, wavelength_nm=wl, pad=False)
+        # the disc as record() draws it (area-weighted edge), centred on the grid, at the sensor's pixels
+        t = holography._disk_transmittance((n, n), (0.5 - n / 2) * px, (0.5 - n / 2) * px, px, np.zeros((1, 2)),
+                                           [d / 2], None, wl * 1e-6)
+        u = holography.propagate(t, dist, pixel_um=DIH_PIXEL_UM, wavelength_nm=wl, pad=False)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the 1 mm guard: the disc sits mid-sensor, its lobes stay on it
             holo = holography.record(np.array([[0.0, 0.0, -dist]]), [d], sensor_z_mm=0.0, wavelength_nm=wl,
@@ -556,6 +558,14 @@ def dih_shock_point(item: dict) -> dict:
     return {"sd_with": float(with_shock.image.std()), "sd_without": float(without.image.std()),
             "sd_imprint": float((with_shock.image - without.image).std()),
             "pellets_in_crop": int(near.sum()), "mach": mach, "mach_angle_deg": math.degrees(mu)}
+
+
+def _robust_sd(a) -> float:
+    """The robust s.d. (1.4826 MAD, :func:`scipy.stats.median_abs_deviation` with the normal
+    scale): the s.d. of a Gaussian core, blind to a few wrong pairs or outliers; NaN below 3 values."""
+    from scipy.stats import median_abs_deviation
+
+    return float(median_abs_deviation(a, scale="normal")) if np.size(a) >= 3 else math.nan
 
 
 def _pool(results: list[dict], key: str, width: int = 0) -> np.ndarray:
@@ -615,8 +625,7 @@ def _condition_stats(results: list[dict], we: int, suffix: str = "") -> dict:
     n_vis = [r["n_truth_visible"] for r in results]
     mean = (lambda a: float(np.mean(a)) if np.size(a) else math.nan)  # noqa: E731
     sd = (lambda a: float(np.std(a, ddof=1)) if np.size(a) >= 3 else math.nan)  # noqa: E731
-    # robust s.d. (1.4826 MAD: the s.d. of a Gaussian core), blind to the few wrong pairs
-    rsd = (lambda a: float(1.4826 * np.median(np.abs(a - np.median(a)))) if np.size(a) >= 3 else math.nan)  # noqa: E731
+    rsd = _robust_sd
     return {"d0": condition(we).d0_mm, "sx": sx, "sz": sz, "z_unc": float(z_uncertainty(sx, sz)), "z_unc_q": float(z_uncertainty_quadrature(sx, sz)),
             "mean_d": mean(d), "sd_d": sd(d), "n_found_mean": mean(n), "n_found_sd": sd(n),
             "n_visible_mean": mean(n_vis), "n_pairs": int(len(p)),
@@ -819,10 +828,9 @@ def run(ctx) -> ReplicationResult:
     dz_mm = ed * md
     iso_d = _pool(dih, "matched_isolated")
     dz_iso = dz_mm[iso_d > 0] if iso_d.size == dz_mm.size else np.zeros(0)
-    rsd_iso = float(1.4826 * np.median(np.abs(dz_iso - np.median(dz_iso)))) if dz_iso.size >= 3 else math.nan
+    rsd_iso = _robust_sd(dz_iso)
     out_d = np.abs(ed) > 5.0  # DIH depth outliers [diameters]
-    dih_rsd_over_d = (float(1.4826 * np.median(np.abs(dz_mm - np.median(dz_mm))) / md.mean()) if md.size >= 3
-                      else math.nan)
+    dih_rsd_over_d = _robust_sd(dz_mm) / md.mean() if md.size else math.nan
     dih_size_err = _pool(dih, "size_error_mm")
     dih_st = _condition_stats(dih, 784) if dih else None
     dih_lat = _condition_stats(dih, 784, "_lat") if dih else None
