@@ -35,6 +35,42 @@ def test_quick_run_schema_and_ids(tmp_path):
     for cv in res["curves"].values():
         assert all(len(v) == len(cv["x"]) for v in cv["y"].values())
     assert (tmp_path / "report.md").is_file() and (tmp_path / "fig8_table3.png").is_file()
+    # the experiment replica (scenes/lfpiv_tomo_paper): the rendered rig's LTPR is Table 4's, the
+    # full-sensor vector count its bookkeeping, the two arms' fields overlap on the lip line
+    assert rows["experiment_ltpr"]["ours"] == pytest.approx(6600 * 4400 / (4 * 480 * 320), rel=1e-12)
+    assert rows["experiment_ltpr"]["agrees"]
+    assert rows["experiment_lf_vectors_full"]["ours"] == "79 x 52 x 19"
+    r = rows["experiment_lf_tomo_correlation"]["ours"]
+    assert r is not None and -1.0 <= r <= 1.0
+    assert rows["experiment_time_ratio_lf_over_tomo"]["ours"] > 0
+    assert (tmp_path / "experiment_lf_vs_tomo.png").is_file()
+
+
+def test_field_correlation_is_the_vector_correlation_on_common_points():
+    """The LF-vs-Tomo comparison: the second field interpolated (trilinear: exact for linear
+    fields) at the first's valid vectors inside its grid; r = 1 for the same flow sampled on
+    two grids, -1 for the reversed fluctuation, and blind to a shared mean vector."""
+    from mitpiv.studies.replications.lfpiv_vs_tomo import _common_points_correlation
+
+    def field(x, y, z, f, valid=None):
+        zz, yy, xx = np.meshgrid(z, y, x, indexing="ij")
+        u, v, w = f(xx, yy, zz)
+        return {"x_mm": x, "y_mm": y, "z_mm": z, "u": u, "v": v, "w": w,
+                "valid": np.ones(u.shape, bool) if valid is None else valid}
+
+    lin = lambda x, y, z: (100 + 3 * x - y, 2 * z + 0.5 * x, -y + z)  # noqa: E731
+    a = field(np.linspace(-1, 1, 5), np.linspace(9, 11, 4), np.linspace(-4, 4, 9), lin)
+    b = field(np.linspace(-3, 3, 7), np.linspace(7, 13, 8), np.linspace(-5, 5, 11), lin)
+    c = _common_points_correlation(a, b)
+    assert c["n"] == 5 * 4 * 9 and c["r"] == pytest.approx(1.0, abs=1e-12) and c["rms_diff_mm_s"] < 1e-9
+    rev = field(np.linspace(-3, 3, 7), np.linspace(7, 13, 8), np.linspace(-5, 5, 11),
+                lambda x, y, z: tuple(50.0 - q for q in lin(x, y, z)))
+    assert _common_points_correlation(a, rev)["r"] == pytest.approx(-1.0, abs=1e-12)
+    # vectors outside the second grid or invalid are left out
+    small = field(np.linspace(-1, 0, 3), np.linspace(9, 11, 4), np.linspace(-4, 4, 9), lin)
+    assert _common_points_correlation(a, small)["n"] == 3 * 4 * 9
+    a["valid"][0] = False
+    assert _common_points_correlation(a, b)["n"] == 5 * 4 * 8
 
 
 def test_full_scale_estimate_fits_a_night_on_two_cores():
