@@ -73,7 +73,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["ltpr", "VOLUME_MM", "LF_CAMERAS", "TOMO", "LFCase", "TomoCase", "lf_camera", "tomo_cameras", "jet",
            "render_light_field", "render_tomo", "seed_particles", "particle_errors", "piv_errors", "lf_point",
-           "tomo_point", "PAPER_TABLE_2", "window_plan", "ideal_piv_errors"]
+           "tomo_point", "PAPER_TABLE_2", "window_plan", "ideal_piv_errors", "piv_errors_by_depth", "lf_depth_point"]
 
 VOLUME_MM = (12.0, 12.0, 10.0)
 D_MM = 40.0
@@ -349,10 +349,9 @@ def particle_errors(volume, grid: VoxelGrid, truth_mm) -> dict:
             "ghost_fraction": float(m.ghost_fraction), "errors_mm_sample": np.round(e[:2000], 5).tolist()}
 
 
-def piv_errors(vol_a, vol_b, grid: VoxelGrid, flow, dt_s: float, passes) -> dict:
-    """Two-pass multi-grid PIV (75 % overlap, UOD + median replacement) and the RMS error of
-    the valid vectors against the flow averaged over the final window: per component, in
-    voxels of the grid (displacement) and in mm/s."""
+def _piv_vector_errors(vol_a, vol_b, grid: VoxelGrid, flow, dt_s: float, passes):
+    """The PIV of :func:`piv_errors` and its scored vectors: (field, positions (n, 3) [mm], error
+    (n, 3) [mm/s], truth (n, 3) [mm/s]) of the valid, non-outlier vectors."""
     from mitpiv.analysis.piv3d import piv3d
 
     fld = piv3d(vol_a, vol_b, grid, windows=list(passes), overlap=0.75, dt_s=dt_s, replace="median")
@@ -361,11 +360,67 @@ def piv_errors(vol_a, vol_b, grid: VoxelGrid, flow, dt_s: float, passes) -> dict
     ok = fld.valid.reshape(-1) & ~fld.outlier.reshape(-1)
     win_mm = np.asarray(passes[-1], dtype=float) * np.asarray(grid.voxel_mm)
     truth = flow.box_average(p[ok], win_mm, nodes=3)
-    err = meas[ok] - truth
+    return fld, p[ok], meas[ok] - truth, truth
+
+
+def piv_errors_by_depth(vol_a, vol_b, grid: VoxelGrid, flow, dt_s: float, passes, *, gross_voxels: float = 5.0) -> dict:
+    """:func:`piv_errors`'s vectors binned by their depth z (one bin per plane of vectors):
+    RMS and median absolute error per component [voxels], the count, and the gross errors
+    (any component beyond ``gross_voxels``): how many, and how many of them lie within half a
+    final window of the focal plane z = 0 (where a plenoptic 1.0 camera puts a particle's
+    light under one lenslet and resolves it no finer than the lenslet)."""
+    fld, p, err, _ = _piv_vector_errors(vol_a, vol_b, grid, flow, dt_s, passes)
+    e = err * dt_s / np.asarray(grid.voxel_mm)
+    zs = np.unique(np.round(p[:, 2], 6))
+    prof = {"z_mm": zs.tolist(), "rms_vox": [], "median_abs_vox": [], "n": []}
+    for z in zs:
+        m = np.abs(p[:, 2] - z) < 1e-5
+        prof["rms_vox"].append(np.sqrt(np.mean(e[m] ** 2, axis=0)).tolist())
+        prof["median_abs_vox"].append(np.median(np.abs(e[m]), axis=0).tolist())
+        prof["n"].append(int(m.sum()))
+    gross = np.any(np.abs(e) > gross_voxels, axis=1)
+    half_window_mm = 0.5 * passes[-1][2] * grid.voxel_mm[2]
+    near = np.abs(p[:, 2]) <= half_window_mm
+    prof.update({"n_vectors": int(len(e)), "n_gross": int(gross.sum()), "n_gross_near_focal_plane": int((gross & near).sum()),
+                 "n_near_focal_plane": int(near.sum()), "half_window_mm": float(half_window_mm),
+                 "rms_vox_all": np.sqrt(np.mean(e**2, axis=0)).tolist(),
+                 "median_abs_vox_all": np.median(np.abs(e), axis=0).tolist(), "gross_voxels": float(gross_voxels)})
+    return prof
+
+
+def lf_depth_point(case: LFCase, *, iterations, rays_per_aperture_pixel: float, drt_rays_per_pixel: int, seed: int,
+                   flow_seed: int = 0) -> dict:
+    """One light-field case reconstructed at several DRT-MART iteration counts (the same images
+    and weights), its PIV errors by depth for each (:func:`piv_errors_by_depth`) and on the
+    ideal volumes: where the reconstruction's errors sit, and what the iterations do to them."""
+    from mitpiv.reconstruct.plenoptic import drt_mart, drt_weights
+
+    cam = lf_camera(case)
+    grid = case.grid()
+    fl, passes, dt, p0, p1 = _particle_pair(case, "lf", case.pmr, grid, seed, flow_seed, 1.0)
+    imgs = to_8bit([render_light_field(cam, p, rays_per_aperture_pixel=rays_per_aperture_pixel, seed=seed + k)
+                    for k, p in enumerate((p0, p1))])
+    a = drt_weights(cam, grid, rays_per_pixel=drt_rays_per_pixel, substeps=2, seed=seed)
+    out = {"camera": case.camera, "pmr": case.pmr, "crop_mm": [case.crop_mm, case.crop_y_mm], "grid": list(grid.shape),
+           "windows": [list(w) for w in passes], "by_iterations": {}}
+    for it in iterations:
+        vols = [drt_mart(im, cam, grid, iterations=int(it), matrix=a) for im in imgs]
+        out["by_iterations"][str(int(it))] = piv_errors_by_depth(vols[0], vols[1], grid, fl, dt, passes)
+    from mitpiv.analysis.quality import truth_volume
+
+    out["ideal"] = piv_errors_by_depth(truth_volume(p0, grid, 1.0), truth_volume(p1, grid, 1.0), grid, fl, dt, passes)
+    return out
+
+
+def piv_errors(vol_a, vol_b, grid: VoxelGrid, flow, dt_s: float, passes) -> dict:
+    """Two-pass multi-grid PIV (75 % overlap, UOD + median replacement) and the RMS error of
+    the valid vectors against the flow averaged over the final window: per component, in
+    voxels of the grid (displacement) and in mm/s."""
+    fld, p, err, truth = _piv_vector_errors(vol_a, vol_b, grid, flow, dt_s, passes)
     vox = np.asarray(grid.voxel_mm)
     rms_mm_s = np.sqrt(np.mean(err**2, axis=0)) if len(err) else np.full(3, np.nan)
     return {"rms_vox": (rms_mm_s * dt_s / vox).tolist(), "rms_mm": (rms_mm_s * dt_s).tolist(),
-            "rms_mm_s": rms_mm_s.tolist(), "n_vectors": int(fld.n_vectors), "n_valid": int(ok.sum()),
+            "rms_mm_s": rms_mm_s.tolist(), "n_vectors": int(fld.n_vectors), "n_valid": int(len(err)),
             "outlier_ratio": float(fld.outlier_ratio), "windows": [list(w) for w in passes],
             "truth_rms_mm_s": np.std(truth, axis=0).tolist() if len(truth) else [math.nan] * 3}
 

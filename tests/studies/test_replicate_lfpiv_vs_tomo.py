@@ -257,3 +257,24 @@ def test_light_field_crop_keeps_the_optics_and_the_densities():
         assert getattr(a, name) == getattr(b, name), name
     # the same particles per microlens, hence per volume
     assert strip.n_particles() / (strip.mla_count[0] * strip.mla_count[1]) == pytest.approx(0.5, abs=0.01)
+
+
+def test_errors_by_depth_partition_the_scored_vectors():
+    """piv_errors_by_depth bins exactly piv_errors' vectors: the per-plane counts add up to the
+    valid vectors, the count-weighted mean square per plane equals the overall RMS, which is
+    piv_errors' own; the gross-error counts are consistent."""
+    from mitpiv.analysis.quality import truth_volume
+
+    case = S.LFCase("low", 14, 1.2, 2.4)
+    grid = case.grid()
+    fl, passes, dt, p0, p1 = S._particle_pair(case, "lf", 14, grid, 5, 0, 1.0)
+    va, vb = truth_volume(p0, grid, 1.0), truth_volume(p1, grid, 1.0)
+    d = S.piv_errors_by_depth(va, vb, grid, fl, dt, passes, gross_voxels=0.5)
+    ref = S.piv_errors(va, vb, grid, fl, dt, passes)
+    n = np.array(d["n"])
+    assert n.sum() == d["n_vectors"] == ref["n_valid"] > 0
+    ms = (np.array(d["rms_vox"]) ** 2 * n[:, None]).sum(0) / n.sum()
+    np.testing.assert_allclose(np.sqrt(ms), d["rms_vox_all"], rtol=1e-12)
+    np.testing.assert_allclose(d["rms_vox_all"], ref["rms_vox"], rtol=1e-12)
+    assert 0 <= d["n_gross_near_focal_plane"] <= min(d["n_gross"], d["n_near_focal_plane"])
+    assert d["half_window_mm"] == pytest.approx(0.5 * passes[-1][2] * grid.voxel_mm[2])

@@ -55,14 +55,17 @@ def scale(quick: bool) -> dict:
     if quick:
         return {"lf_crop_mm": {"low": 1.2, "high": 0.6}, "lf_iterations": 5, "drt_rays_per_pixel": 4,
                 "rays_per_aperture_pixel": 4.0, "window_scale": 1.0, "tomo_crop_y_mm": 0.3, "tomo_iterations": 5,
-                "convergence_random_rays": 400_000, "convergence_levels": (1.0, 4.0, 16.0)}
+                "convergence_random_rays": 400_000, "convergence_levels": (1.0, 4.0, 16.0),
+                "depth_crop_mm": (1.2, 2.4), "depth_iterations": (3, 10)}
     # light field: a strip across the whole shear layer (y: the first pass needs several windows
     # across the mean shear to give the second a deforming predictor; measured on ideal volumes,
     # LF low PMR 14: u error 2.7 -> 0.8 voxels from a 4.8 mm square to a 4.8 x 12 mm strip), cropped
     # along the jet axis x, where the flow varies slowly
     return {"lf_crop_mm": {"low": (4.8, 12.0), "high": (2.4, 7.2)}, "lf_iterations": 400, "drt_rays_per_pixel": 8,
             "rays_per_aperture_pixel": 256.0, "window_scale": 1.0, "tomo_crop_y_mm": 12.0, "tomo_iterations": 40,
-            "convergence_random_rays": 5_000_000, "convergence_levels": (1.0, 4.0, 16.0, 64.0, 256.0, 1024.0)}
+            "convergence_random_rays": 5_000_000, "convergence_levels": (1.0, 4.0, 16.0, 64.0, 256.0, 1024.0),
+            # the errors by depth: LF low PMR 14 on half the strip (4.8 x 6 mm) at 20 / 100 / 400 iterations
+            "depth_crop_mm": (4.8, 6.0), "depth_iterations": (20, 100, 400)}
 
 
 def _crop(c) -> tuple[float, float]:
@@ -393,6 +396,13 @@ def run(ctx) -> ReplicationResult:
         R[("lf", it["camera"], it["pmr"]) if it["kind"] == "lf" else ("tomo", it["nc"], it["ppp"])] = r
     conv = ctx.cached(f"convergence_r{sc['convergence_random_rays']}_l{'-'.join(f'{v:g}' for v in sc['convergence_levels'])}"
                       f"_s{ctx.seed}", lambda: convergence(sc, ctx.seed))
+    dc = sc["depth_crop_mm"]
+    depth = ctx.cached(f"depth_low_pmr14_c{dc[0]:g}x{dc[1]:g}_it{'-'.join(str(i) for i in sc['depth_iterations'])}"
+                       f"_r{sc['rays_per_aperture_pixel']:g}_drt{sc['drt_rays_per_pixel']}_s{ctx.seed}",
+                       lambda: S.lf_depth_point(S.LFCase("low", 14, *dc), iterations=sc["depth_iterations"],
+                                                rays_per_aperture_pixel=sc["rays_per_aperture_pixel"],
+                                                drt_rays_per_pixel=sc["drt_rays_per_pixel"],
+                                                seed=1000 * ctx.seed + 98))
     rows: list[Row] = []
     curves: dict[str, Curve] = {}
     figures: list[str] = []
@@ -513,6 +523,25 @@ def run(ctx) -> ReplicationResult:
     curves["ltpr_crossing"] = Curve(cross_x, {"ours": [v for v in cross_lf]}, "N_c", "crossing LTPR",
                                     paper={"paper": [PAPER_CROSSING[n] for n in NCS]})
 
+    # --- where the light-field errors sit: by depth, against the DRT-MART iterations
+    its = [str(i) for i in sc["depth_iterations"]]
+    zs = depth["ideal"]["z_mm"]
+    curves["lf_error_by_depth_pmr14_low"] = Curve(
+        zs, {**{f"u rms, {i} iterations": [r[0] for r in depth["by_iterations"][i]["rms_vox"]] for i in its},
+             "u rms, ideal volumes": [r[0] for r in depth["ideal"]["rms_vox"]]},
+        "vector depth z [mm] (0: the focal plane)", "RMS u error [voxels]")
+    last = depth["by_iterations"][its[-1]]
+    share = last["n_gross_near_focal_plane"] / last["n_gross"] if last["n_gross"] else math.nan
+    rows.append(Row("lf_gross_errors_near_focal_plane_pmr14_low", f"share of the gross PIV errors (> "
+                    f"{last['gross_voxels']:g} voxels) within half a window of the focal plane, LF low PMR 14, "
+                    f"{its[-1]} iterations", "diagnostic", "not in the paper", _num(share),
+                    note=f"{last['n_gross']} gross of {last['n_vectors']} vectors; the band holds "
+                    f"{last['n_near_focal_plane']} vectors; median |error| u / v / w "
+                    + " / ".join(f"{v:.2f}" for v in last["median_abs_vox_all"]) + " voxels, RMS "
+                    + " / ".join(f"{v:.2f}" for v in last["rms_vox_all"])
+                    + "; by iterations " + ", ".join(f"{i}: RMS u {depth['by_iterations'][i]['rms_vox_all'][0]:.2f}, "
+                                                     f"{depth['by_iterations'][i]['n_gross']} gross" for i in its)))
+
     # --- Table 3: reconstruction times, extrapolated linearly to the full sensors / volumes
     def full_time(key):
         r = R[key]
@@ -594,6 +623,20 @@ def run(ctx) -> ReplicationResult:
     ax.legend(fontsize=7)
     fig.tight_layout()
     figures.append(ctx.figure(fig, "lf_image_convergence.png"))
+    plt.close(fig)
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
+    for k, comp in enumerate("uvw"):
+        for i in its:
+            axes[k].plot(zs, [r[k] for r in depth["by_iterations"][i]["rms_vox"]], "o-", label=f"{i} iterations")
+        axes[k].plot(zs, [r[k] for r in depth["ideal"]["rms_vox"]], "k--", label="ideal volumes")
+        axes[k].axvline(0.0, color="grey", lw=0.8)
+        axes[k].set_xlabel("vector depth z [mm] (0: focal plane)")
+        axes[k].set_title(f"{comp}")
+    axes[0].set_ylabel("RMS error [voxels]")
+    axes[0].legend(fontsize=7)
+    fig.suptitle("LF-PIV, low LTPR, PMR 14: PIV error by depth and DRT-MART iterations")
+    fig.tight_layout()
+    figures.append(ctx.figure(fig, "lf_error_by_depth.png"))
     plt.close(fig)
 
     est_full, est_quick = cost_estimate(False), cost_estimate(True)
