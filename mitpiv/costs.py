@@ -115,7 +115,8 @@ def check_memory(cost: Cost, *, what: str, fix: str, available: int | None = Non
     avail = available_memory_bytes() if available is None else int(available)
     if not math.isfinite(cost.memory_bytes) or cost.memory_bytes > MEMORY_FRACTION * avail:
         raise ConfigError(f"{what}: {cost.items} need at least {human_bytes(cost.memory_bytes)} of memory, more than "
-                          f"the {human_bytes(avail)} available on this machine; {fix}.")
+                          f"{MEMORY_FRACTION:.0%} of the {human_bytes(avail)} available on this machine "
+                          f"({human_bytes(MEMORY_FRACTION * avail)}); {fix}.")
     if quiet:
         log.debug("estimate for %s: %s", what, cost)
         return cost

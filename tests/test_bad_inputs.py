@@ -367,6 +367,10 @@ def test_memory_refusal_names_knob_estimate_and_fix():
                                           r"larger voxels"):
         costs.check_memory(c, what="--voxel-mm 0.01", fix="use larger voxels", available=2**30)
     assert costs.check_memory(c, what="x", fix="y", available=2**40) is c
+    # refused below the available memory (above 80 % of it): the message says the share, not "more than available"
+    with pytest.raises(ConfigError, match=r"need at least 12.1 GiB of memory, more than 80% of the 14 GiB available "
+                                          r"on this machine \(11.2 GiB\)"):
+        costs.check_memory(c, what="x", fix="y", available=14 * 2**30)
     assert costs.available_memory_bytes() > 0
 
 
