@@ -388,11 +388,35 @@ def piv_errors_by_depth(vol_a, vol_b, grid: VoxelGrid, flow, dt_s: float, passes
     return prof
 
 
+def _zero_lateral_boundary(vol, trim: int) -> np.ndarray:
+    """A copy of a (z, y, x) volume with its ``trim`` outermost voxels in x and y set to 0."""
+    v = np.array(vol, copy=True)
+    v[:, :trim, :] = 0
+    v[:, -trim:, :] = 0
+    v[:, :, :trim] = 0
+    v[:, :, -trim:] = 0
+    return v
+
+
+def _hot_boundary_share(vol, trim: int, top: int = 100) -> float:
+    """Share of the squared intensity of the ``top`` brightest voxels that lies within ``trim``
+    voxels of the lateral (x, y) boundary (the boundary holds ``~4 trim / n`` of the voxels)."""
+    v = np.asarray(vol, dtype=float)
+    idx = np.argsort(v.ravel())[::-1][:top]
+    _, y, x = np.unravel_index(idx, v.shape)
+    edge = (y < trim) | (y >= v.shape[1] - trim) | (x < trim) | (x >= v.shape[2] - trim)
+    e = v.ravel()[idx] ** 2
+    return float(e[edge].sum() / e.sum()) if e.sum() > 0 else math.nan
+
+
 def lf_depth_point(case: LFCase, *, iterations, rays_per_aperture_pixel: float, drt_rays_per_pixel: int, seed: int,
-                   flow_seed: int = 0) -> dict:
+                   flow_seed: int = 0, trim: int = 2) -> dict:
     """One light-field case reconstructed at several DRT-MART iteration counts (the same images
     and weights), its PIV errors by depth for each (:func:`piv_errors_by_depth`) and on the
-    ideal volumes: where the reconstruction's errors sit, and what the iterations do to them."""
+    ideal volumes: where the reconstruction's errors sit, and what the iterations do to them.
+    Also per iteration count: the share of the brightest voxels' energy on the grid's lateral
+    boundary (``trim`` voxels) and the PIV errors with that boundary zeroed (a diagnostic of the
+    crop's edge artefact, not a processing step of the study)."""
     from mitpiv.reconstruct.plenoptic import drt_mart, drt_weights
 
     cam = lf_camera(case)
@@ -405,7 +429,12 @@ def lf_depth_point(case: LFCase, *, iterations, rays_per_aperture_pixel: float, 
            "windows": [list(w) for w in passes], "by_iterations": {}}
     for it in iterations:
         vols = [drt_mart(im, cam, grid, iterations=int(it), matrix=a) for im in imgs]
-        out["by_iterations"][str(int(it))] = piv_errors_by_depth(vols[0], vols[1], grid, fl, dt, passes)
+        r = piv_errors_by_depth(vols[0], vols[1], grid, fl, dt, passes)
+        r["hot_energy_share_at_boundary"] = float(np.mean([_hot_boundary_share(v, trim) for v in vols]))
+        trimmed = [_zero_lateral_boundary(v, trim) for v in vols]
+        r["trimmed"] = piv_errors_by_depth(trimmed[0], trimmed[1], grid, fl, dt, passes)
+        out["by_iterations"][str(int(it))] = r
+    out["trim_voxels"] = int(trim)
     from mitpiv.analysis.quality import truth_volume
 
     out["ideal"] = piv_errors_by_depth(truth_volume(p0, grid, 1.0), truth_volume(p1, grid, 1.0), grid, fl, dt, passes)
