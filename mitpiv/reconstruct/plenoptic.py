@@ -33,7 +33,7 @@ from mitpiv.progress import Progress, bar, track
 from mitpiv.reconstruct._kernels import kernels
 from mitpiv.reconstruct.tomo import check_iterations
 
-__all__ = ["plenoptic_volume", "fuse", "paper_refocus", "paper_view_weights", "drt_weights", "drt_mart",
+__all__ = ["plenoptic_volume", "fuse", "paper_refocus", "paper_view_weights", "drt_weights", "drt_mart", "coverage",
            "FUSE_NORMALISATIONS"]
 
 FUSE_NORMALISATIONS = ("histogram", "max", "none")
@@ -301,9 +301,37 @@ def drt_weights(camera: PlenopticCamera, grid: VoxelGrid, *, rays_per_pixel: int
     return csr_matrix((val, cols, indptr), shape=(w * h, grid.n_voxels))
 
 
+def coverage(total, camera: PlenopticCamera, grid: VoxelGrid) -> np.ndarray:
+    """Ray coverage of each voxel (flat, as ``grid``'s voxels): its total DRT weight (the
+    column sums of :func:`drt_weights`' matrix, ``total``), averaged over a lenslet-wide
+    square of its plane (normal to the grid axis nearest the optical axis; the edges
+    replicated, so a grid smaller than the field is not penalised), over that plane's 90th
+    percentile among the voxels seen (the fully covered voxels' level, robust to the sampling
+    noise of the rays and to a plane whose edge band is wide). About 1 inside the field,
+    about 0.5 on its edge."""
+    from scipy.ndimage import uniform_filter
+
+    cam = _check_camera(camera, "coverage")
+    t = np.asarray(total, dtype=np.float64).reshape(grid.shape)  # (z, y, x)
+    axis_xyz = int(np.argmax(np.abs(cam.to_world_mitsuba[:3, 2])))
+    axis = 2 - axis_xyz  # the (z, y, x) array axis of the stepping direction
+    lenslet_mm = cam.mla_pitch_um * 1e-3 / abs(cam.magnification)
+    size = [max(1, int(round(lenslet_mm / grid.voxel_mm[2 - a]))) for a in range(3)]
+    size[axis] = 1
+    smooth = uniform_filter(t, size=size, mode="nearest")
+    ref = np.moveaxis(np.where(t > 0, smooth, np.nan), axis, 0).reshape(t.shape[axis], -1)
+    with np.errstate(all="ignore"):
+        med = np.nanpercentile(ref, 90, axis=1) if np.isfinite(ref).any() else np.zeros(t.shape[axis])
+    shape = [1, 1, 1]
+    shape[axis] = -1
+    med = np.where(np.isfinite(med) & (med > 0), med, np.inf).reshape(shape)
+    return (smooth / med).ravel()
+
+
 def drt_mart(raw, camera: PlenopticCamera, grid: VoxelGrid, *, iterations: int = 5, mu: float = 1.0,
              rays_per_pixel: int = 16, substeps: int = 2, prune_fraction: float | None = 0.5, dark_floor: float = 1e-3,
-             matrix=None, seed: int = 0, progress: Progress = None, return_info: bool = False):
+             min_coverage: float | None = None, matrix=None, seed: int = 0, progress: Progress = None,
+             return_info: bool = False):
     """Dense-ray-tracing MART of one raw plenoptic image.
 
     Parameters
@@ -326,6 +354,16 @@ def drt_mart(raw, camera: PlenopticCamera, grid: VoxelGrid, *, iterations: int =
     dark_floor : float >= 0
         The remaining dark pixels are raised to ``dark_floor * max(raw)`` so they scale
         the voxels they see down instead of zeroing them (0: strict MART zeroing).
+    min_coverage : float in (0, 1) or None
+        Field-edge exclusion: a voxel whose ray coverage (its total weight, averaged over a
+        lenslet-wide neighbourhood of its plane, :func:`coverage`) is below ``min_coverage``
+        times its plane's fully covered level is zero and dropped from the system. Voxels at the edge of the field, whose
+        ray cones the sensor captures only in part, otherwise collect the light the missing
+        rays would have explained and become the brightest voxels of the volume, which an
+        un-normalised PIV correlation locks onto (measured on a cropped PMR-14 grid: 58 % and
+        73 % of the 100 brightest voxels' squared intensity in the 2 outermost voxels after
+        100 and 400 iterations). A grid well inside the field keeps its voxels (a few in
+        10^4 fall below 0.75 by the rays' sampling noise). None: keep all.
     matrix : csr_matrix, optional
         Weights from an earlier :func:`drt_weights` call on the same camera and grid.
 
@@ -348,6 +386,10 @@ def drt_mart(raw, camera: PlenopticCamera, grid: VoxelGrid, *, iterations: int =
         raise ConfigError(f"drt_mart: 'prune_fraction' must lie in [0, 1] or be None, got {prune_fraction!r}.")
     if not (np.isfinite(dark_floor) and 0 <= dark_floor < 1):
         raise ConfigError(f"drt_mart: 'dark_floor' must lie in [0, 1), got {dark_floor!r}.")
+    if min_coverage is not None and (isinstance(min_coverage, bool) or not isinstance(min_coverage, int | float)
+                                     or not 0 < min_coverage < 1):
+        raise ConfigError(f"drt_mart: 'min_coverage' must lie in (0, 1) or be None, got {min_coverage!r}; 0.75 drops "
+                          "the voxels at the edge of the field that the sensor sees half of.")
     flat = np.ascontiguousarray(np.maximum(img, 0.0).ravel())
     t0 = time.perf_counter()
     if matrix is None:
@@ -357,6 +399,11 @@ def drt_mart(raw, camera: PlenopticCamera, grid: VoxelGrid, *, iterations: int =
     t_weights = time.perf_counter() - t0
     total = np.bincount(matrix.indices, weights=matrix.data, minlength=grid.n_voxels)
     seen = np.flatnonzero(total > 0)
+    n_edge = 0
+    if min_coverage is not None:
+        covered = coverage(total, cam, grid) >= min_coverage
+        n_edge = int(np.count_nonzero(~covered[seen]))
+        seen = seen[covered[seen]]
     live = seen
     if prune_fraction is not None:
         dark = matrix[flat <= 0.0]
@@ -382,7 +429,7 @@ def drt_mart(raw, camera: PlenopticCamera, grid: VoxelGrid, *, iterations: int =
     if not return_info:
         return out
     info = {"weight_entries": int(matrix.nnz), "active_entries": int(a.nnz), "active_voxels": int(len(live)),
-            "voxels_seen": int(len(seen)), "weights_s": t_weights, "iterate_s": t_iter,
+            "voxels_seen": int(len(seen)), "edge_voxels_dropped": n_edge, "weights_s": t_weights, "iterate_s": t_iter,
             "voxel_updates_per_s": (a.nnz * iterations / t_iter) if t_iter > 0 and iterations else math.nan,
             "weight_bytes": int(matrix.data.nbytes + matrix.indices.nbytes + matrix.indptr.nbytes)}
     return out, info

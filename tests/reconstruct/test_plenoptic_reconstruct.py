@@ -137,3 +137,39 @@ def test_drt_mart_reconstructs(views):
         drt_mart(raw, cam, GRID, prune_fraction=2.0)
     with pytest.raises(ConfigError, match="rays_per_pixel"):
         drt_weights(cam, GRID, rays_per_pixel=0)
+
+
+def test_drt_mart_drops_the_voxels_at_the_edge_of_the_field():
+    """min_coverage: a grid cropped to the sensor's field (Shi et al.'s 800 px PMR-14 camera,
+    a 2.4 x 3 mm crop) has voxels on its lateral edge whose ray cones the sensor catches about
+    half of (coverage ~0.5-0.7 in the focal plane); those, and only voxels near the edge, are
+    dropped at 0.75. A grid well inside the field keeps its voxels (a few in 10^4 fall below
+    0.75 by the rays' sampling noise). Bad values are refused by name."""
+    from mitpiv.reconstruct.plenoptic import coverage
+    from mitpiv.studies import lfpiv_tomo_sim as S
+
+    case = S.LFCase("low", 14, 2.4, 3.0)
+    cam, grid = S.lf_camera(case), case.grid()
+    a = drt_weights(cam, grid, rays_per_pixel=8, substeps=2, seed=1)
+    total = np.bincount(a.indices, weights=a.data, minlength=grid.n_voxels)
+    c = coverage(total, cam, grid).reshape(grid.shape)
+    mid = grid.shape[0] // 2  # the focal plane
+    lenslet_vox = 14 * 0.015 / grid.voxel_mm[0]  # 7 voxels
+    assert np.median(c[mid, :, 0]) < 0.75 and np.median(c[mid, :, -1]) < 0.75
+    assert np.median(c[mid, 20:-20, 20:-20]) == pytest.approx(1.0, abs=0.05)
+    dropped = np.argwhere(c[mid] < 0.75)  # (y, x)
+    ny, nx = grid.shape[1:]
+    edge_dist = np.minimum.reduce([dropped[:, 0], ny - 1 - dropped[:, 0], dropped[:, 1], nx - 1 - dropped[:, 1]])
+    assert len(dropped) and edge_dist.max() <= lenslet_vox
+    rng = np.random.default_rng(2)
+    raw = rng.random(cam.resolution[::-1]) * (rng.random(cam.resolution[::-1]) < 0.05)
+    vol, info = drt_mart(raw, cam, grid, iterations=2, matrix=a, min_coverage=0.75, return_info=True)
+    assert info["edge_voxels_dropped"] > 0 and np.all(vol.reshape(-1)[c.reshape(-1) < 0.75] == 0)
+    inner = VoxelGrid(origin_mm=tuple(np.asarray(grid.origin_mm) + [0.6, 0.75, 0.0]), voxel_mm=grid.voxel_mm,
+                      shape=(grid.shape[0], grid.shape[1] // 2, grid.shape[2] // 2))
+    ai = drt_weights(cam, inner, rays_per_pixel=8, substeps=2, seed=1)
+    ci = coverage(np.bincount(ai.indices, weights=ai.data, minlength=inner.n_voxels), cam, inner)
+    assert np.mean(ci < 0.75) < 1e-3
+    for bad in (0.0, 1.0, 1.5, True, "0.5"):
+        with pytest.raises(ConfigError, match="min_coverage"):
+            drt_mart(raw, cam, grid, iterations=1, matrix=a, min_coverage=bad)
