@@ -20,7 +20,7 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
                        preprocess: float | None = None, smooth_px: float = 0.0, floor_rel: float = 0.0,
                        combine: str = "multiplicative",
                        threshold_k: float | None = 3.0,
-                       rays_per_pixel: int = 16, fuse_normalise: str = "histogram",
+                       rays_per_pixel: int = 16, fuse_normalise: str = "histogram", min_coverage: float | None = None,
                        progress: Progress = None, cache=None, mappings=None) -> tuple[np.ndarray, dict]:
     """Reconstruct a volume from the images of one frame and their EXR metadata.
 
@@ -28,7 +28,7 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
         camera from the metadata, devignetted by ``whites`` when given), refocused onto
         ``grid`` (``combine``: additive or multiplicative), the volumes of several cameras
         fused (:func:`~mitpiv.reconstruct.fuse`, ``fuse_normalise``); "drt-mart": one raw
-        image, dense-ray-tracing MART. Other methods: :func:`reconstruct_volume`.
+        image, dense-ray-tracing MART (``rays_per_pixel``, ``min_coverage``). Other methods: :func:`reconstruct_volume`.
     progress : None, bool or callable
         Passed to the method (planes, iterations); see :mod:`mitpiv.progress`.
     cache : :class:`~mitpiv.reconstruct.tomo.WeightCache`, optional
@@ -75,7 +75,7 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
         if len(images) != 1:
             raise ConfigError(f"reconstruct: drt-mart takes one raw image, got {len(images)}.")
         return drt_mart(images[0], cams[0], grid, iterations=iterations, mu=mu, rays_per_pixel=rays_per_pixel,
-                        progress=progress, return_info=True)
+                        min_coverage=min_coverage, progress=progress, return_info=True)
     whites = list(whites) if whites is not None else [None] * len(images)
     if len(whites) != len(images):
         raise ConfigError(f"reconstruct: give one white image per raw image ({len(images)}), got {len(whites)}.")

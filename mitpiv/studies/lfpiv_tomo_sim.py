@@ -44,7 +44,9 @@ The paper's set-up (Tables 1-2) and our readings of what it leaves open:
   (r = D/2, the shear layer). The paper's station "(x = 0.5D, y = 0.5D, z = 1D) from the
   nozzle exit" read literally would put the volume 0.71 D off the axis, outside a jet one
   diameter from the nozzle; we read it as 1 D downstream in the shear layer (stated).
-* **Reconstruction**: DRT-MART (:func:`mitpiv.reconstruct.plenoptic.drt_mart`) at 2:2:10,
+* **Reconstruction**: DRT-MART (:func:`mitpiv.reconstruct.plenoptic.drt_mart`) at 2:2:10
+  without the voxels at the edge of the field that the sensor sees less than 75 % of
+  (``min_coverage``: on a crop they become the brightest of the volume and lock the PIV),
   MLOS-SMART (:func:`mitpiv.reconstruct.mart` with ``smart=True``) at 1:1:1.
 * **Particle centres**: local maxima localised by the intensity-weighted centroid of a 3^3
   box (the paper's "peak centroid"), matched one-to-one to the truth within 2 voxel edges.
@@ -94,6 +96,11 @@ LF_IMAGE_F_NUMBER = 4.0  # the in-house MLA's f-number (Shi et al. 2016), matche
 #: Tomographic cameras (section 2.2)
 TOMO = {"resolution": 160, "object_distance_mm": 946.5, "image_distance_mm": 93.4, "focal_length_mm": 85.0,
         "mm_per_px": 0.075, "nz": 133, "particle_diameter_px": 3.0}
+
+#: DRT-MART drops the voxels at the edge of the field whose ray cones the sensor catches less
+#: than this share of (:func:`mitpiv.reconstruct.plenoptic.coverage`): on the cropped grids
+#: they otherwise hold most of the brightest voxels' energy and lock the PIV (see the report)
+MIN_COVERAGE = 0.75
 
 #: Table 2: (first window, second window) (x, y, z) voxels per case
 PAPER_TABLE_2 = {
@@ -410,13 +417,14 @@ def _hot_boundary_share(vol, trim: int, top: int = 100) -> float:
 
 
 def lf_depth_point(case: LFCase, *, iterations, rays_per_aperture_pixel: float, drt_rays_per_pixel: int, seed: int,
-                   flow_seed: int = 0, trim: int = 2) -> dict:
+                   flow_seed: int = 0, trim: int = 2, min_coverage: float = MIN_COVERAGE) -> dict:
     """One light-field case reconstructed at several DRT-MART iteration counts (the same images
     and weights), its PIV errors by depth for each (:func:`piv_errors_by_depth`) and on the
     ideal volumes: where the reconstruction's errors sit, and what the iterations do to them.
     Also per iteration count: the share of the brightest voxels' energy on the grid's lateral
-    boundary (``trim`` voxels) and the PIV errors with that boundary zeroed (a diagnostic of the
-    crop's edge artefact, not a processing step of the study)."""
+    boundary (``trim`` voxels), the PIV errors with that boundary zeroed (a diagnostic of the
+    crop's edge artefact, not a processing step of the study) and with the study's cure, the
+    field's edge dropped from the reconstruction (``min_coverage``, ``"masked"``)."""
     from mitpiv.reconstruct.plenoptic import drt_mart, drt_weights
 
     cam = lf_camera(case)
@@ -433,8 +441,12 @@ def lf_depth_point(case: LFCase, *, iterations, rays_per_aperture_pixel: float, 
         r["hot_energy_share_at_boundary"] = float(np.mean([_hot_boundary_share(v, trim) for v in vols]))
         trimmed = [_zero_lateral_boundary(v, trim) for v in vols]
         r["trimmed"] = piv_errors_by_depth(trimmed[0], trimmed[1], grid, fl, dt, passes)
+        masked = [drt_mart(im, cam, grid, iterations=int(it), matrix=a, min_coverage=min_coverage) for im in imgs]
+        r["masked"] = piv_errors_by_depth(masked[0], masked[1], grid, fl, dt, passes)
+        r["masked"]["hot_energy_share_at_boundary"] = float(np.mean([_hot_boundary_share(v, trim) for v in masked]))
         out["by_iterations"][str(int(it))] = r
     out["trim_voxels"] = int(trim)
+    out["min_coverage"] = float(min_coverage)
     from mitpiv.analysis.quality import truth_volume
 
     out["ideal"] = piv_errors_by_depth(truth_volume(p0, grid, 1.0), truth_volume(p1, grid, 1.0), grid, fl, dt, passes)
@@ -475,8 +487,9 @@ def _particle_pair(case, kind: str, density: float, grid: VoxelGrid, seed: int, 
 
 
 def lf_point(case: LFCase, *, iterations: int, rays_per_aperture_pixel: float, drt_rays_per_pixel: int,
-             window_scale: float, seed: int, flow_seed: int = 0) -> dict:
-    """Render, reconstruct (DRT-MART) and score one light-field case (two frames)."""
+             window_scale: float, seed: int, flow_seed: int = 0, min_coverage: float | None = MIN_COVERAGE) -> dict:
+    """Render, reconstruct (DRT-MART, the field's edge dropped below ``min_coverage``) and
+    score one light-field case (two frames)."""
     from mitpiv.reconstruct.plenoptic import drt_mart, drt_weights
 
     t0 = time.perf_counter()
@@ -492,7 +505,7 @@ def lf_point(case: LFCase, *, iterations: int, rays_per_aperture_pixel: float, d
     weights_s = time.perf_counter() - t_w
     vols, infos = [], []
     for im in imgs:
-        v, info = drt_mart(im, cam, grid, iterations=iterations, matrix=a, return_info=True)
+        v, info = drt_mart(im, cam, grid, iterations=iterations, matrix=a, min_coverage=min_coverage, return_info=True)
         vols.append(v)
         infos.append(info)
     rec_s = weights_s + sum(i["iterate_s"] for i in infos)
@@ -507,7 +520,8 @@ def lf_point(case: LFCase, *, iterations: int, rays_per_aperture_pixel: float, d
            "reconstruct_s": rec_s, "reconstruct_s_per_frame": per_frame, "weight_entries": int(a.nnz),
            "active_entries": int(np.mean([i["active_entries"] for i in infos])),
            "active_voxels": int(np.mean([i["active_voxels"] for i in infos])), "iterations": iterations,
-           "pixels": case.pixels, "full_pixels": case.spec["resolution"] ** 2}
+           "pixels": case.pixels, "full_pixels": case.spec["resolution"] ** 2, "min_coverage": min_coverage,
+           "edge_voxels_dropped": int(infos[0].get("edge_voxels_dropped", 0))}
     out["particles_err"] = particle_errors(vols[0], grid, p0)
     out["piv"] = piv_errors(vols[0], vols[1], grid, fl, dt, passes)
     out["piv_ideal"] = ideal_piv_errors(p0, p1, grid, fl, dt, passes, sigma_voxels=1.0)

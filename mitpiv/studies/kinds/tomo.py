@@ -198,6 +198,9 @@ class ReconstructionTable(Table):
     fuse_normalise: Literal["histogram", "max", "none"] = Field(
         "histogram", description="plenoptic: normalisation before fusing cameras")
     rays_per_pixel: Annotated[int, Field(ge=1)] = Field(16, description="drt-mart ray bundle per pixel")
+    min_coverage: Annotated[float, Field(gt=0, lt=1)] | None = Field(
+        None, description="drt-mart: drop the voxels at the edge of the field whose ray cones the sensor catches less "
+                          "than this share of (0.75: those it sees half of; none: keep all)")
     camera_model: Literal["true", "undistorted"] = Field(
         "true", description="'undistorted': the cameras' lens distortion left uncorrected")
 
@@ -559,7 +562,7 @@ def stage_reconstruct(ctx: StageContext) -> dict:
                                       smooth_px=r.smooth_px, floor_rel=r.floor_rel,
                                       combine=r.combine, threshold_k=r.threshold_k,
                                       fuse_normalise=r.fuse_normalise, rays_per_pixel=r.rays_per_pixel,
-                                      progress=ctx.progress, cache=cache)
+                                      min_coverage=r.min_coverage, progress=ctx.progress, cache=cache)
         if inf:
             info[f"frame{frame}"] = {k: v for k, v in inf.items() if isinstance(v, int | float | str)}
         write_volume(ctx.out / f"volume_{frame}.npz", vol, {"method": r.method, "grid": grid.to_dict()})
