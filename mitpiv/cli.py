@@ -398,7 +398,8 @@ def cmd_reconstruct(args) -> int:
                                    mu=args.mu, weights=args.weights, interpolation=args.interpolation,
                                    preprocess=args.preprocess, combine=args.combine,
                                    threshold_k=None if args.threshold_k < 0 else args.threshold_k,
-                                   rays_per_pixel=args.rays_per_pixel, progress=_progress(args), mappings=mappings)
+                                   rays_per_pixel=args.rays_per_pixel, min_coverage=args.min_coverage,
+                                   progress=_progress(args), mappings=mappings)
     elapsed = time.perf_counter() - t0
     metrics = {}
     if truth is not None:
@@ -753,6 +754,9 @@ def main(argv=None) -> int:
     c.add_argument("--threshold-k", type=_float_in(), default=3.0, help="sapiv: keep mean + k sigma per plane (< 0: none)")
     c.add_argument("--white", nargs="+", default=None, help="plenoptic: white EXR per image")
     c.add_argument("--rays-per-pixel", type=_int_in(1, 4096), default=16, help="drt-mart ray bundle per pixel")
+    c.add_argument("--min-coverage", type=_float_in(0.0, 1.0, lo_open=True, hi_open=True), default=None,
+                   help="drt-mart: drop the voxels at the edge of the field whose ray cones the sensor catches less than "
+                   "this share of (e.g. 0.75; default: keep all)")
     c.add_argument("--truth", default=None, help="truth .npz: print Q, Q*, Q' and SNR")
     c.add_argument("--frame", type=_int_in(0), default=0, help="truth frame of the images")
     c.add_argument("--calibration", default=None, help="DLT / polynomial table (.csv, .json): map through it, not the "

@@ -44,6 +44,11 @@ def test_quick_run_schema_and_ids(tmp_path):
     assert r is not None and -1.0 <= r <= 1.0
     assert rows["experiment_time_ratio_lf_over_tomo"]["ours"] > 0
     assert (tmp_path / "experiment_lf_vs_tomo.png").is_file()
+    # the replica's light-field arm drops the field's edge (experiment.toml: min_coverage = 0.75)
+    from mitpiv.io.records import read_json
+
+    stage = read_json(next((tmp_path / "work" / "runs").glob("experiment_lf_*")) / "reconstruct" / "stage.json")
+    assert stage["result"]["frame0"]["edge_voxels_dropped"] > 0
 
 
 def test_field_correlation_is_the_vector_correlation_on_common_points():

@@ -232,7 +232,11 @@ def experiment_arms(quick: bool) -> dict[str, dict]:
 
 
 def _arm_key(arms: dict) -> str:
-    return hashlib.sha1(json.dumps(arms, sort_keys=True).encode()).hexdigest()[:10]
+    """The arms' overrides and the scene's files (experiment, study, scene XML): a changed
+    scene is a new cache key."""
+    d = experiment_dir()
+    files = "".join((d / f).read_text() for f in ("experiment.toml", "study.toml", "scene.xml"))
+    return hashlib.sha1((json.dumps(arms, sort_keys=True) + files).encode()).hexdigest()[:10]
 
 
 def _common_points_correlation(a: dict, b: dict) -> dict:
