@@ -292,12 +292,19 @@ def drt_weights(camera: PlenopticCamera, grid: VoxelGrid, *, rays_per_pixel: int
     pbar.close()
     log.debug("drt_weights: %d pixels traced in %.1f s", len(pix), time.perf_counter() - t0)
     key = np.concatenate(keys) if keys else np.zeros(0, np.int64)
+    del keys
     val = np.concatenate(vals) if vals else np.zeros(0, np.float32)
-    order = np.argsort(key, kind="stable")  # chunks may interleave when 'pixels' is unsorted
-    key, val = key[order], val[order]
-    rows, cols = key // grid.n_voxels, (key % grid.n_voxels).astype(np.int32)
+    del vals
+    # each chunk's keys are unique and sorted (np.unique): in pixel order they are sorted already;
+    # chunks may interleave only when 'pixels' is unsorted (the sort's copies cost 20 bytes per entry)
+    if len(key) > 1 and not np.all(key[1:] > key[:-1]):
+        order = np.argsort(key, kind="stable")
+        key, val = key[order], val[order]
+        del order
+    cols = (key % grid.n_voxels).astype(np.int32)
     indptr = np.zeros(w * h + 1, np.int64)
-    np.cumsum(np.bincount(rows, minlength=w * h), out=indptr[1:])
+    np.cumsum(np.bincount(key // grid.n_voxels, minlength=w * h), out=indptr[1:])
+    del key
     return csr_matrix((val, cols, indptr), shape=(w * h, grid.n_voxels))
 
 
