@@ -406,6 +406,7 @@ def drt_mart(raw, camera: PlenopticCamera, grid: VoxelGrid, *, iterations: int =
     t_weights = time.perf_counter() - t0
     total = np.bincount(matrix.indices, weights=matrix.data, minlength=grid.n_voxels)
     seen = np.flatnonzero(total > 0)
+    n_seen = len(seen)
     n_edge = 0
     if min_coverage is not None:
         covered = coverage(total, cam, grid) >= min_coverage
@@ -428,15 +429,15 @@ def drt_mart(raw, camera: PlenopticCamera, grid: VoxelGrid, *, iterations: int =
     for _ in track(range(iterations), desc="drt_mart: iterations", progress=progress):
         k["mart_sequential"](indptr, indices, data, flat, vol, float(mu))
     t_iter = time.perf_counter() - t1
-    log.info("drt_mart: %d active voxels of %d seen, weights %.1f s, %d iterations %.1f s", len(live), len(seen),
-             t_weights, iterations, t_iter)
+    log.info("drt_mart: %d active voxels of %d seen (%d at the field's edge dropped), weights %.1f s, %d iterations "
+             "%.1f s", len(live), n_seen, n_edge, t_weights, iterations, t_iter)
     out = np.zeros(grid.n_voxels, np.float32)
     out[live] = vol
     out = out.reshape(grid.shape)
     if not return_info:
         return out
     info = {"weight_entries": int(matrix.nnz), "active_entries": int(a.nnz), "active_voxels": int(len(live)),
-            "voxels_seen": int(len(seen)), "edge_voxels_dropped": n_edge, "weights_s": t_weights, "iterate_s": t_iter,
+            "voxels_seen": int(n_seen), "edge_voxels_dropped": n_edge, "weights_s": t_weights, "iterate_s": t_iter,
             "voxel_updates_per_s": (a.nnz * iterations / t_iter) if t_iter > 0 and iterations else math.nan,
             "weight_bytes": int(matrix.data.nbytes + matrix.indices.nbytes + matrix.indptr.nbytes)}
     return out, info

@@ -396,7 +396,9 @@ def piv_errors_by_depth(vol_a, vol_b, grid: VoxelGrid, flow, dt_s: float, passes
 
 
 def _zero_lateral_boundary(vol, trim: int) -> np.ndarray:
-    """A copy of a (z, y, x) volume with its ``trim`` outermost voxels in x and y set to 0."""
+    """A copy of a (z, y, x) volume with its ``trim`` (>= 1) outermost voxels in x and y set to 0."""
+    if int(trim) != trim or trim < 1:
+        raise ConfigError(f"lfpiv_tomo_sim: 'trim' must be a whole number >= 1, got {trim!r}.")
     v = np.array(vol, copy=True)
     v[:, :trim, :] = 0
     v[:, -trim:, :] = 0

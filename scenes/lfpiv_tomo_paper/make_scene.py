@@ -10,7 +10,7 @@ experiment (seed paper 001, section 3, Table 4) as a simulated rig.
   along y: a crop of the sensor centred that far off the axis, to within the chief rays'
   obliquity (10 mm at 411 mm: 1.4 deg, neglected).
 - Four tomographic cameras ``t0..t3`` in a cross around it (azimuth 0 / 90 / 180 / 270 deg,
-  ``$cross_deg`` off the z axis), 480 x 320 px of 7.4 um (the 4 Mpx Imperx B2014's pitch,
+  25 deg off the z axis, each with its 480 px side along the jet), 480 x 320 px of 7.4 um (the 4 Mpx Imperx B2014's pitch,
   the paper's simulated Tomo camera, section 2.2), Micro-NIKKOR 85 mm at 0.079 mm per pixel
   (object distance f (1 + 1/M) = 992.4 mm), f/11 thin lens Scheimpflug-focused on the sheet
   mid-plane z = 0.
@@ -69,6 +69,17 @@ psf = (f'<string name="psf" value="fft"/>\n<float name="psf_f_number" value="{T_
 tomo = distorted_pinhole_sensors_xml(cams, distance_mm=T_OBJECT_MM, focal_length_mm=T_IMAGE_MM,
                                      pixel_pitch_um=T_PIXEL_UM, f_number=T_PLUGIN_F_NUMBER, film_id="tomofilm",
                                      ids=[f"t{i}" for i in range(4)], extra_xml=psf)
+# every camera's 480 px side along the jet (x, the volume's 38 mm): a look-at pose with image
+# "up" along y instead of the sphere placement's (which turns the cameras at azimuth 0 / 180 by
+# 90 deg, their 320 px side along x)
+blocks = []
+for cam, block in zip(cams, tomo.rstrip().split("\n\n"), strict=True):
+    keep = [ln for ln in block.splitlines() if not any(f'name="{k}"' in ln for k in (
+        "target", "laser_direction", "sheet_normal", "azimuth_deg", "elevation_deg", "distance_mm"))]
+    o = ", ".join(f"{v:.10g}" for v in cam["position_mm"])
+    keep.insert(1, f'        <transform name="to_world"><lookat origin="{o}" target="0, 0, 0" up="0, 1, 0"/></transform>')
+    blocks.append("\n".join(keep))
+tomo = "\n\n".join(blocks) + "\n"
 tilts = ", ".join(f"{c['scheimpflug']['object_tilt_deg']:.1f}" for c in cams)
 
 xml = f"""<scene version="3.0.0">

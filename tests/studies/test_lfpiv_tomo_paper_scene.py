@@ -65,6 +65,19 @@ def test_cameras_are_table_4s(sensors):
     # the cross: the four cameras at azimuths 0 / 90 / 180 / 270 deg about the z axis
     az = sorted(np.degrees(np.arctan2(c.position_mm[1], c.position_mm[0])) % 360 for c in tomo)
     assert az == pytest.approx([0.0, 90.0, 180.0, 270.0], abs=1e-4)
+    # each camera's 480 px side along the jet (x): Table 4's 480 x 320 x 130 volume is seen by all
+    # four cameras, but for the slanted views through its 10 mm depth (25 deg: ~12 px beyond the film)
+    rng = np.random.default_rng(1)
+    pts = rng.uniform([-18.96, -12.64, -5.135], [18.96, 12.64, 5.135], (20000, 3))
+    seen = np.ones(len(pts), bool)
+    for c in tomo:
+        uv = c.project(pts)
+        seen &= (uv[:, 0] >= 0) & (uv[:, 0] < 480) & (uv[:, 1] >= 0) & (uv[:, 1] < 320)
+    assert seen.mean() > 0.9
+    mid = pts[np.abs(pts[:, 2]) < 0.5]  # the mid-plane: all of it
+    for c in tomo:
+        uv = c.project(mid * [0.97, 0.97, 1.0])
+        assert np.all((uv[:, 0] >= 0) & (uv[:, 0] < 480) & (uv[:, 1] >= 0) & (uv[:, 1] < 320))
     # the paper's LTPR: 6600 x 4400 over 4 x 480 x 320
     assert ltpr(plen.resolution, tomo[0].resolution, 4) == pytest.approx(47.27, abs=0.005)
 
