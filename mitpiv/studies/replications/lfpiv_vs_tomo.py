@@ -150,14 +150,14 @@ def cost_estimate(quick: bool) -> dict:
             "cpu_s": lf_s + tomo_s}
 
 
+def _vectors_per_axis(n_xyz, w_xyz) -> tuple[int, ...]:
+    """Vectors per axis of windows ``w_xyz`` at 75 % overlap over a grid of ``n_xyz`` voxels."""
+    return tuple(max(1, int((n - w) // max(1, int(round(0.25 * w))) + 1)) for n, w in zip(n_xyz, w_xyz, strict=True))
+
+
 def _window_voxels(shape_zyx, passes) -> float:
     """Sum over the passes of vectors x window voxels (75 % overlap)."""
-    n = 0.0
-    for w in passes:
-        step = [max(1, int(round(0.25 * v))) for v in w]
-        vec = np.prod([max(1, (s - ww) // st + 1) for s, ww, st in zip(shape_zyx[::-1], w, step, strict=True)])
-        n += float(vec) * float(np.prod(w))
-    return n
+    return sum(float(np.prod(_vectors_per_axis(shape_zyx[::-1], w))) * float(np.prod(w)) for w in passes)
 
 
 def convergence(sc: dict, seed: int) -> dict:
@@ -299,8 +299,7 @@ def experiment_summary(ctx, quick: bool) -> dict:
 def _exp_vectors(n_vox, windows) -> tuple[int, ...]:
     """Vectors per axis of a final window at 75 % overlap over a grid (x, y, z voxels)."""
     w = windows[-1]
-    w = (w, w, w) if np.isscalar(w) else tuple(w)
-    return tuple(int((n - k) // max(1, k // 4) + 1) for n, k in zip(n_vox, w, strict=True))
+    return _vectors_per_axis(n_vox, (w, w, w) if np.isscalar(w) else tuple(w))
 
 
 def _experiment_rows(E: dict) -> list[Row]:
