@@ -387,10 +387,18 @@ def cmd_reconstruct(args) -> int:
         ids = [m.get("sensor_id") for m in metas]
         mappings = mappings_from_calibration(args.calibration, names=ids if all(ids) else None,
                                              resolution=images[0].shape[::-1])
-    costs.check_memory(costs.reconstruction_cost(grid.n_voxels, n_images=len(images), iterations=args.iterations,
-                                                 method=args.method),
-                       what=f"reconstruct: --voxel-mm {args.voxel_mm} on --bounds {' '.join(map(str, args.bounds))}",
-                       fix="use larger voxels (--voxel-mm) or a smaller volume (--bounds)")
+    cost, fix = (costs.reconstruction_cost(grid.n_voxels, n_images=len(images), iterations=args.iterations,
+                                           method=args.method), "use larger voxels (--voxel-mm) or a smaller volume (--bounds)")
+    if args.method == "drt-mart":  # the ray-traced weights dominate: pixels x rays x slabs
+        from mitpiv.lightfield.decode import optics_from_metadata
+        from mitpiv.reconstruct.plenoptic import drt_cost
+
+        cam = optics_from_metadata(metas[0])
+        if cam is not None:
+            cost = drt_cost(cam, grid, rays_per_pixel=args.rays_per_pixel, iterations=args.iterations)
+            fix += ", fewer --rays-per-pixel, or a smaller light-field image (the weights grow with its pixels)"
+    costs.check_memory(cost, what=f"reconstruct: --voxel-mm {args.voxel_mm} on --bounds {' '.join(map(str, args.bounds))}",
+                       fix=fix)
     logging.getLogger("mitpiv").info("grid %dx%dx%d voxels of %s mm, %d image(s), method %s", grid.shape[2],
                                      grid.shape[1], grid.shape[0], grid.voxel_mm, len(images), args.method)
     t0 = time.perf_counter()

@@ -25,7 +25,7 @@ from pathlib import Path
 from mitpiv.errors import ConfigError
 
 __all__ = ["Cost", "available_memory_bytes", "check_memory", "check_disk", "human_bytes", "human_seconds",
-           "reconstruction_cost", "focal_stack_cost", "piv_cost", "piv_vectors", "particles_cost", "MEMORY_FRACTION",
+           "reconstruction_cost", "drt_mart_cost", "focal_stack_cost", "piv_cost", "piv_vectors", "particles_cost", "MEMORY_FRACTION",
            "MAX_ITERATIONS"]
 
 log = logging.getLogger(__name__)
@@ -48,6 +48,23 @@ REFOCUS_SAMPLES_PER_S = 2e8
 PIV_VOXELS_PER_S = 2.5e9
 #: Seeding and advection: particles per second.
 PARTICLES_PER_S = 5e6
+# DRT-MART (mitpiv.reconstruct.plenoptic.drt_weights / drt_mart), measured on the lfpiv-vs-tomo
+# replication's light-field grids (docs/replications/lfpiv-vs-tomo, commit 806ae28): weight
+# entries = pixels x rays per pixel x slabs along the optical axis x 0.91-1.05 over its seven
+# grids (67-182 slabs, PMR 7 / 14 / 28); the replica's 3.97e8 entries built in 59 s, 400
+# iterations at 1.3e8 updates/s over the 47 % of the entries left once dark and edge voxels
+# are dropped, and ~14 GB resident at the peak (~35 bytes per entry).
+#: DRT weight entries per pixel, ray and slab.
+DRT_ENTRIES_PER_PIXEL_RAY_SLAB = 1.0
+#: Bytes per weight entry at the peak: the measured ~35 (the matrix, its dark rows and its
+#: live columns held at once while DRT-MART starts; the keys and values of every chunk and
+#: their concatenation while the weights are built take 24 of them).
+DRT_BYTES_PER_ENTRY = 35.0
+#: Weight entries built per second.
+DRT_ENTRIES_PER_S = 6.7e6
+#: MART updates (weight entries) per second per iteration, and the share of the entries left.
+DRT_UPDATES_PER_S = 1.3e8
+DRT_ACTIVE_FRACTION = 0.5
 
 
 @dataclass(frozen=True)
@@ -156,6 +173,22 @@ def reconstruction_cost(n_voxels: float, *, n_images: int = 1, iterations: int =
                 items=f"{_count(n_voxels)} voxels x {n_images} image(s) x {sweeps} iteration(s)")
 
 
+def drt_mart_cost(pixels: float, rays_per_pixel: int, slabs: int, *, iterations: int, n_voxels: float,
+                  n_images: int = 1, entries_per_pixel_ray_slab: float = DRT_ENTRIES_PER_PIXEL_RAY_SLAB) -> Cost:
+    """DRT-MART of a plenoptic image: its sparse weights (:data:`DRT_BYTES_PER_ENTRY` per
+    entry while they are built; pixels x rays per pixel x slabs of the grid along the optical
+    axis x ``entries_per_pixel_ray_slab`` entries, which
+    :func:`mitpiv.reconstruct.plenoptic.drt_cost` measures on a sample of the pixels) and the
+    voxel arrays (13 bytes a voxel), time from building the weights and sweeping the live
+    entries ``iterations`` times, for each of ``n_images`` images."""
+    entries = float(pixels) * int(rays_per_pixel) * int(slabs) * float(entries_per_pixel_ray_slab)
+    per_image = entries / DRT_ENTRIES_PER_S + max(int(iterations), 1) * DRT_ACTIVE_FRACTION * entries / DRT_UPDATES_PER_S
+    return Cost(memory_bytes=DRT_BYTES_PER_ENTRY * entries + 13.0 * float(n_voxels),
+                seconds=per_image * max(int(n_images), 1),
+                items=f"{_count(entries)} weight entries ({_count(pixels)} px x {int(rays_per_pixel)} rays x "
+                      f"{int(slabs)} slabs) x {max(int(iterations), 1)} iteration(s)")
+
+
 def focal_stack_cost(n_planes: float, plane_shape, *, n_samples_per_plane: float | None = None) -> Cost:
     """A focal stack streamed to disk: float32 planes on disk, one plane and its weights in
     memory; time from the light-field samples gathered per plane."""
@@ -166,20 +199,36 @@ def focal_stack_cost(n_planes: float, plane_shape, *, n_samples_per_plane: float
                 items=f"{_count(n_planes)} plane(s) of {_count(px)} px", disk_bytes=4.0 * px * n_planes)
 
 
-def piv_vectors(grid_shape, window: int, overlap: float) -> int:
-    """Vectors of one PIV pass: windows of ``window`` voxels stepped by ``window * (1 - overlap)``."""
-    step = max(1, int(round(window * (1.0 - overlap))))
-    return int(math.prod(max(0, (int(n) - window) // step + 1) for n in grid_shape))
+def piv_vectors(grid_shape, window, overlap: float) -> int:
+    """Vectors of one PIV pass on a (n_z, n_y, n_x) grid: windows of ``window`` voxels (one
+    size, or (w_x, w_y, w_z)) stepped by ``window * (1 - overlap)`` along each axis."""
+    w_zyx = _window_zyx(window)
+    return int(math.prod(max(0, (int(n) - w) // max(1, int(round(w * (1.0 - overlap)))) + 1)
+                         for n, w in zip(grid_shape, w_zyx, strict=True)))
+
+
+def _window_zyx(window) -> tuple[int, int, int]:
+    """A PIV window (one size or (w_x, w_y, w_z)) as (w_z, w_y, w_x)."""
+    import numpy as np
+
+    if np.ndim(window) == 0:
+        return (int(window),) * 3
+    w = tuple(int(v) for v in np.ravel(window))
+    if len(w) != 3:
+        raise ConfigError(f"PIV window {window!r} must be one size or three (w_x, w_y, w_z).")
+    return w[::-1]
 
 
 def piv_cost(grid_shape, windows, overlap: float) -> Cost:
     """Multi-pass 3D PIV: the vector fields of the last pass (positions, velocities,
-    flags: 80 bytes a vector) and one (2w)^3 complex correlation per vector of the largest
-    batch; time from the correlation voxels of every pass."""
-    ws = [max(w) if isinstance(w, tuple | list) else int(w) for w in windows]
+    flags: 80 bytes a vector) and one correlation of twice the window per axis (complex, 16
+    bytes a voxel) per vector of the largest batch; time from the correlation voxels of every
+    pass. Windows: one size, or (w_x, w_y, w_z), per pass."""
+    ws = [_window_zyx(w)[::-1] for w in windows]  # (w_x, w_y, w_z)
     n = [piv_vectors(grid_shape, w, overlap) for w in ws]
-    vox = sum(k * (2 * w) ** 3 for k, w in zip(n, ws, strict=True))
-    return Cost(memory_bytes=80.0 * max(n) + 16.0 * (2 * max(ws)) ** 3, seconds=vox * 3 / PIV_VOXELS_PER_S,
+    corr = [math.prod(2 * v for v in w) for w in ws]
+    vox = sum(k * c for k, c in zip(n, corr, strict=True))
+    return Cost(memory_bytes=80.0 * max(n) + 16.0 * max(corr), seconds=vox * 3 / PIV_VOXELS_PER_S,
                 items=f"{_count(max(n))} vectors per pass x {len(ws)} pass(es)")
 
 

@@ -173,3 +173,30 @@ def test_drt_mart_drops_the_voxels_at_the_edge_of_the_field():
     for bad in (0.0, 1.0, 1.5, True, "0.5"):
         with pytest.raises(ConfigError, match="min_coverage"):
             drt_mart(raw, cam, grid, iterations=1, matrix=a, min_coverage=bad)
+
+
+def test_drt_cost_counts_the_weights_before_they_are_built(views):
+    """drt_cost: drt_weights traced for 1024 random pixels and scaled to the sensor predicts
+    the entries the whole matrix holds (within 10 %: the sample's relative noise is ~3 %) for
+    the head-on camera and the one at 25 deg, while pixels x rays x slabs alone would be off by
+    half (this camera's rays are vignetted); the memory check refuses a light-field grid the
+    voxel count alone would let through, naming the fix."""
+    from mitpiv import costs
+    from mitpiv.reconstruct.plenoptic import drt_cost
+
+    _, v, _ = views
+    for ang in (0, 25):
+        cam = v[ang][1]
+        nnz = drt_weights(cam, GRID, rays_per_pixel=4, substeps=2).nnz
+        est = drt_cost(cam, GRID, rays_per_pixel=4, iterations=10)
+        entries = (est.memory_bytes - 13.0 * GRID.n_voxels) / costs.DRT_BYTES_PER_ENTRY
+        assert entries == pytest.approx(nnz, rel=0.10), ang
+        assert nnz < 0.75 * RES * RES * 4 * GRID.shape[0]  # the plain product would be far off
+    # the replica's light-field arm on a third of its sensor (2200 x 1466 px, 1100 x 733 x 182
+    # voxels): 1.9 GB by the voxels, 113 GB by the weights
+    c = costs.drt_mart_cost(2200 * 1466, 8, 182, iterations=400, n_voxels=1100 * 733 * 182)
+    assert costs.reconstruction_cost(1100 * 733 * 182, iterations=400, method="drt-mart").memory_bytes < 2e9
+    assert c.memory_bytes > 1e11
+    with pytest.raises(ConfigError, match="rays_per_pixel"):
+        costs.check_memory(c, what="[reconstruction] drt-mart", fix="use fewer rays_per_pixel or a crop",
+                           available=24 * 2**30)

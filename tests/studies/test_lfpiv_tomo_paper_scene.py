@@ -148,3 +148,25 @@ def test_experiment_and_study_are_table_4s():
     assert n.tolist() == [480, 320, 130] and b.mean(axis=1) == pytest.approx(np.zeros(3), abs=1e-12)
     assert [(k - 32) // 8 + 1 for k in n.astype(int)] == [57, 37, 13]
     assert t["piv.windows"] == [64, 32] and t["render.sensors"] == ["t0", "t1", "t2", "t3"]
+
+
+def test_reconstruct_stage_checks_the_drt_weights_memory(tmp_path, monkeypatch):
+    """The runner's reconstruct stage estimates DRT-MART by its ray-traced weights (a sample of
+    the pixels traced, scaled to the sensor), not by the voxels alone: on a 220 x 220 px crop
+    (110 x 110 x 182 voxels, ~30 MB of voxel arrays, ~6e7 weight entries) with 1 GB available
+    the stage refuses before building anything, naming the knob and the fix, and writes no
+    volume."""
+    from mitpiv import costs
+    from mitpiv.errors import ConfigError
+    from mitpiv.studies.runner import run_config
+
+    ov = {"scene.params.lf_width": 220, "scene.params.lf_height": 220, "scene.params.rays_per_particle": 2000,
+          "seeding.box_min_mm": [-1.638, 8.362, -5.0], "seeding.box_max_mm": [1.638, 11.638, 5.0],
+          "reconstruction.bounds_mm": [-0.638, 0.638, 9.362, 10.638, -5.0, 5.0], "reconstruction.iterations": 2}
+    cfg = load_experiment(SCENE / "experiment.toml", ov)
+    run_config(cfg, tmp_path / "run", until="sensor")
+    monkeypatch.setattr(costs, "available_memory_bytes", lambda: 2**30)
+    assert costs.reconstruction_cost(110 * 110 * 182, iterations=2, method="drt-mart").memory_bytes < 0.1 * 2**30
+    with pytest.raises(ConfigError, match=r"weight entries .*rays_per_pixel"):
+        run_config(cfg, tmp_path / "run", until="reconstruct")
+    assert not list((tmp_path / "run").glob("reconstruct/volume_*.npz"))

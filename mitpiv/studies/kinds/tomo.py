@@ -547,10 +547,22 @@ def stage_reconstruct(ctx: StageContext) -> dict:
     cfg = ctx.cfg
     r = cfg.reconstruction
     grid = grid_of(cfg)
-    costs.check_memory(costs.reconstruction_cost(grid.n_voxels, n_images=len(list((ctx.run_dir / source_of(cfg)).glob("*_frame000.exr"))),
-                                                 iterations=r.iterations, method=r.method),
-                       what=f"[reconstruction] {r.method} on {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]} voxels, "
-                            f"per frame", fix="use larger voxels or smaller bounds")
+    if r.method == "drt-mart":  # the ray-traced weights dominate: pixels x rays x slabs
+        from mitpiv.io import read_exr_metadata
+        from mitpiv.lightfield.decode import optics_from_metadata
+        from mitpiv.reconstruct.plenoptic import drt_cost
+
+        first = sorted((ctx.run_dir / source_of(cfg)).glob("*_frame000.exr"))
+        cam = optics_from_metadata(read_exr_metadata(first[0])) if first else None
+        cost = drt_cost(cam, grid, rays_per_pixel=r.rays_per_pixel, iterations=r.iterations) if cam is not None else \
+            costs.reconstruction_cost(grid.n_voxels, iterations=r.iterations, method=r.method)
+        fix = "use larger voxels, smaller bounds, fewer rays_per_pixel or a smaller light-field sensor (a crop)"
+    else:
+        cost = costs.reconstruction_cost(grid.n_voxels, n_images=len(list((ctx.run_dir / source_of(cfg)).glob(
+            "*_frame000.exr"))), iterations=r.iterations, method=r.method)
+        fix = "use larger voxels or smaller bounds"
+    costs.check_memory(cost, what=f"[reconstruction] {r.method} on {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]} "
+                       "voxels, per frame", fix=fix)
     info = {}
     cache = WeightCache()  # the cameras do not move between frames: weights built once
     for frame in FRAMES:
