@@ -47,8 +47,63 @@ def test_quick_run_schema_and_ids(tmp_path):
     # the replica's light-field arm drops the field's edge (experiment.toml: min_coverage = 0.75)
     from mitpiv.io.records import read_json
 
-    stage = read_json(next((tmp_path / "work" / "runs").glob("experiment_lf_*")) / "reconstruct" / "stage.json")
+    runs = {p.name.split("_")[2]: p for p in (tmp_path / "work" / "runs").glob("experiment_lf_*")}
+    assert "mean4" in runs and len(runs) == 2  # Table 4's and the variant
+    stage = read_json(next(p for k, p in runs.items() if k != "mean4") / "reconstruct" / "stage.json")
     assert stage["result"]["frame0"]["edge_voxels_dropped"] > 0
+    # the variant: the jet's mean flow only, two more passes at the final window
+    for arm in ("lf", "tomo"):
+        assert rows[f"experiment_mean4_{arm}_outlier_pct"]["ours"] is not None
+    exp = read_json(runs["mean4"] / "experiment.json")
+    assert exp["flow"]["envelope"] == 0.0 and len(exp["piv"]["windows"]) == 4
+    # the ideal-volume diagnostic of the replica: both arms on their own particles, the factor grid
+    for arm in ("lf", "tomo"):
+        assert rows[f"experiment_{arm}_ideal_rms_vox"]["ours"] > 0
+        assert rows[f"experiment_{arm}_particles_per_final_window"]["ours"] > 0
+    factors = [r for r in rows if r.startswith("experiment_ideal_seeding_")]
+    assert len(factors) == 8 and all(rows[r]["ours"] is not None for r in factors)
+    assert (tmp_path / "experiment_ideal_factors.png").is_file()
+
+
+def test_ideal_piv_recovers_a_uniform_translation_and_counts_the_window():
+    """The replica's ideal-volume PIV: a uniform translation (an exact, known answer) comes
+    back to a small fraction of a voxel with no outliers, scored by the runner's
+    velocity_error; the runner's PIV settings pass through."""
+    from mitpiv.grid import VoxelGrid
+    from mitpiv.physics.flows import flow_from_dict
+    from mitpiv.studies.replications.lfpiv_vs_tomo import _ideal_piv
+
+    grid = VoxelGrid.from_bounds([0.0, 0.0, 0.0], [1.6, 1.6, 1.6], 0.025)  # 64^3
+    rng = np.random.default_rng(3)
+    p0 = rng.random((1500, 3)) * 1.8 - 0.1
+    dt = 0.01
+    flow = flow_from_dict({"kind": "uniform", "velocity_mm_s": [7.5, -5.0, 2.5]})  # (3, -2, 1) voxels
+    p1 = p0 + np.array([7.5, -5.0, 2.5]) * dt
+    r = _ideal_piv(p0, p1, grid, flow, dt, {"windows": [32, 16], "overlap": 0.75, "deform": True,
+                                            "replace": "median"})
+    assert r["outlier_ratio"] < 0.01 and r["n_vectors"] == 13**3  # the UOD flags a few in 10^3 of noise
+    assert max(r["rms_vox"]) < 0.05 and max(r["median_abs_vox"]) < 0.05
+    with pytest.raises(ConfigError):
+        _ideal_piv(p0, p1, grid, flow, dt, {"windows": [32, 16], "overlap": 1.5})
+
+
+def test_subwindow_motion_of_a_linear_flow_is_all_followed_by_a_deforming_window():
+    """Solid-body rotation is linear: nothing is left after the linear fit, and the spread of
+    u = -omega y over a window of width W is omega W / sqrt(12) (a uniform distribution) times
+    dt over the voxel; a sinusoidal (ABC) flow leaves a non-linear part."""
+    from mitpiv.physics.flows import flow_from_dict
+    from mitpiv.studies.replications.lfpiv_vs_tomo import subwindow_motion
+
+    rot = flow_from_dict({"kind": "solid_body", "omega_rad_s": 2.0, "center": [0, 0, 0], "axis": [0, 0, 1]})
+    c = np.random.default_rng(0).random((50, 3)) * 4.0
+    m = subwindow_motion(rot, c, [1.0, 0.5, 0.5], 0.01, 0.1, samples=2000)
+    assert max(m["nonlinear_vox"]) < 1e-9
+    # sample std of 2000 uniform points: ~1.6 % relative; 6 % is > 3 sigma
+    assert m["spread_vox"][0] == pytest.approx(2.0 * 0.5 / math.sqrt(12) * 0.1 / 0.01, rel=0.06)
+    assert m["spread_vox"][1] == pytest.approx(2.0 * 1.0 / math.sqrt(12) * 0.1 / 0.01, rel=0.06)
+    assert m["spread_vox"][2] < 1e-12
+    abc = flow_from_dict({"kind": "abc", "length_mm": 1.0, "speed_mm_s": 1.0})
+    assert min(subwindow_motion(abc, c, 2.0, 0.01, 0.1)["nonlinear_vox"]) > 0.1
 
 
 def test_field_correlation_is_the_vector_correlation_on_common_points():
