@@ -622,7 +622,7 @@ def _ideal_section(E: dict, I: dict, M: dict) -> str:
     lines.append(
         f"- **Before the reconstruction.** On ideal volumes of its own particles the light-field arm keeps "
         f"{pct(s['lf'])} outliers and {_v3(s['lf']['rms_vox'])} voxels; reconstructed {pct(E['lf'])} and "
-        f"{_v3(E['lf']['rms_vox'] or [math.nan] * 3)}: {share:.0%} of the outlier rate is there before any "
+        f"{_v3(E['lf']['rms_vox'] or [math.nan] * 3)}: {100 * share:.0f} % of the outlier rate is there before any "
         f"reconstruction, which then multiplies the RMS errors. The tomographic arm: {pct(s['tomo'])} ideal, "
         f"{pct(E['tomo'])} reconstructed.\n"
         f"- **The crop.** A {I['crop_px'][0]} x {I['crop_px'][1]} px crop with Table 4's own first window ({wx} in "
