@@ -13,6 +13,7 @@ from mitpiv.progress import Progress
 from mitpiv.reconstruct.tomo import TOMO_METHODS, reconstruct_volume
 
 RECONSTRUCT_METHODS = TOMO_METHODS + ("plenoptic", "drt-mart")
+_NO_INDEX = np.zeros(0, dtype=np.int64)  # DRT-MART's cache entry has no active-voxel index
 
 
 def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, whites=None, iterations: int = 5,
@@ -32,7 +33,8 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
     progress : None, bool or callable
         Passed to the method (planes, iterations); see :mod:`mitpiv.progress`.
     cache : :class:`~mitpiv.reconstruct.tomo.WeightCache`, optional
-        MART/SMART weights shared by the frames of one experiment (same cameras and grid).
+        MART/SMART weights, or DRT-MART's ray-traced matrix, shared by the frames of one
+        experiment (same cameras and grid).
     mappings : list of CameraMapping, optional
         Tomographic methods: one mapping per image (e.g. a user's calibration,
         :func:`~mitpiv.reconstruct.mapping.mappings_from_calibration`) instead of the true
@@ -64,7 +66,7 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
         raise ConfigError(f"reconstruct: method={method!r} is not one of {RECONSTRUCT_METHODS}.")
     from mitpiv.lightfield import decode
     from mitpiv.lightfield.decode import optics_from_metadata
-    from mitpiv.reconstruct.plenoptic import drt_mart, fuse, plenoptic_volume
+    from mitpiv.reconstruct.plenoptic import drt_mart, drt_weights, fuse, plenoptic_volume
 
     cams = [optics_from_metadata(m) for m in metas]
     if any(c is None for c in cams):
@@ -74,8 +76,25 @@ def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, 
     if method == "drt-mart":
         if len(images) != 1:
             raise ConfigError(f"reconstruct: drt-mart takes one raw image, got {len(images)}.")
-        return drt_mart(images[0], cams[0], grid, iterations=iterations, mu=mu, rays_per_pixel=rays_per_pixel,
-                        min_coverage=min_coverage, progress=progress, return_info=True)
+        matrix, t_weights = None, 0.0
+        if cache is not None:  # the frames of an experiment share the camera and the grid
+            import json
+            import time
+
+            key = ("drt-mart", json.dumps(cams[0].to_dict(), sort_keys=True, default=str),
+                   json.dumps(grid.to_dict(), sort_keys=True), int(rays_per_pixel))
+            hit = cache.get(key, _NO_INDEX)
+            if hit is None:
+                t0 = time.perf_counter()
+                matrix = drt_weights(cams[0], grid, rays_per_pixel=rays_per_pixel, progress=progress)
+                t_weights = time.perf_counter() - t0
+                cache.put(key, _NO_INDEX, [matrix])
+            else:
+                matrix = hit[0]
+        vol, info = drt_mart(images[0], cams[0], grid, iterations=iterations, mu=mu, rays_per_pixel=rays_per_pixel,
+                             min_coverage=min_coverage, matrix=matrix, progress=progress, return_info=True)
+        info["weights_s"] += t_weights  # built here (0 when the cache held them)
+        return vol, info
     whites = list(whites) if whites is not None else [None] * len(images)
     if len(whites) != len(images):
         raise ConfigError(f"reconstruct: give one white image per raw image ({len(images)}), got {len(whites)}.")

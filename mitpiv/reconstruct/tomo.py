@@ -642,7 +642,11 @@ class WeightCache:
 
     @property
     def nbytes(self) -> int:
-        return 0 if self._cams is None else int(sum(c.nbytes for c in self._cams) + self._idx.nbytes)
+        if self._cams is None:
+            return 0
+        size = sum(c.nbytes if hasattr(c, "nbytes") else c.data.nbytes + c.indices.nbytes + c.indptr.nbytes
+                   for c in self._cams)  # arrays, or a sparse matrix (DRT-MART)
+        return int(size + self._idx.nbytes)
 
     def get(self, key, idx):
         if self._cams is not None and key == self._key and np.array_equal(idx, self._idx):

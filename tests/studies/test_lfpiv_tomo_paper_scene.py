@@ -170,3 +170,28 @@ def test_reconstruct_stage_checks_the_drt_weights_memory(tmp_path, monkeypatch):
     with pytest.raises(ConfigError, match=r"weight entries .*rays_per_pixel"):
         run_config(cfg, tmp_path / "run", until="reconstruct")
     assert not list((tmp_path / "run").glob("reconstruct/volume_*.npz"))
+
+
+def test_reconstruct_stage_builds_the_drt_weights_once(tmp_path):
+    """The runner's DRT-MART traces its weights for the first frame and reuses them for the
+    second (same camera and grid): the second frame's weights take no time and its volume is
+    the one drt_mart gives the same image on its own."""
+    from mitpiv.io import read_exr, read_volume
+    from mitpiv.io.records import read_json
+    from mitpiv.lightfield.decode import optics_from_metadata
+    from mitpiv.reconstruct.plenoptic import drt_mart
+    from mitpiv.studies.runner import run_config
+
+    ov = {"scene.params.lf_width": 110, "scene.params.lf_height": 110, "scene.params.rays_per_particle": 2000,
+          "seeding.box_min_mm": [-1.319, 8.681, -5.0], "seeding.box_max_mm": [1.319, 11.319, 5.0],
+          "reconstruction.bounds_mm": [-0.319, 0.319, 9.681, 10.319, -5.0, 5.0], "reconstruction.iterations": 2,
+          "reconstruction.rays_per_pixel": 4}
+    run_config(load_experiment(SCENE / "experiment.toml", ov), tmp_path / "run", until="reconstruct")
+    info = read_json(tmp_path / "run" / "reconstruct" / "stage.json")["result"]
+    assert info["frame0"]["weights_s"] > 0.05 and info["frame1"]["weights_s"] < 0.01
+    assert info["frame1"]["weight_entries"] == info["frame0"]["weight_entries"]
+    img, meta = read_exr(next((tmp_path / "run" / "sensor").glob("*_frame001.exr")))
+    vol, grid, _ = read_volume(tmp_path / "run" / "reconstruct" / "volume_1.npz")
+    alone = drt_mart(np.asarray(img if img.ndim == 2 else img[..., 0], dtype=np.float64), optics_from_metadata(meta),
+                     grid, iterations=2, rays_per_pixel=4, min_coverage=0.75)
+    np.testing.assert_array_equal(vol, alone)

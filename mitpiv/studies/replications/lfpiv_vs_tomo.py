@@ -156,9 +156,9 @@ def cost_estimate(quick: bool) -> dict:
 
 def _experiment_cost_s(quick: bool) -> float:
     """The replica's two arms, run twice (as Table 4 and :func:`variant_arms`), two frames each:
-    DRT-MART (:func:`mitpiv.costs.drt_mart_cost`, its weights rebuilt per frame, one entry per
-    pixel, ray and slab), MLOS-SMART over the four cameras and the PIV of every pass
-    (:func:`mitpiv.costs.piv_cost`)."""
+    DRT-MART (:func:`mitpiv.costs.drt_mart_cost`, one entry per pixel, ray and slab, the weights
+    built for the first frame only), MLOS-SMART over the four cameras and the PIV of every pass
+    (:func:`mitpiv.costs.piv_cost`); not the rendering."""
     from mitpiv import costs
     from mitpiv.studies.runner import load_experiment
 
@@ -177,6 +177,7 @@ def _experiment_cost_s(quick: bool) -> float:
                 c = costs.drt_mart_cost(p["lf_width"] * p["lf_height"], r.rays_per_pixel, n_xyz[2],
                                         iterations=r.iterations, n_voxels=n)
                 lf_slabs = n_xyz[2]
+                total -= p["lf_width"] * p["lf_height"] * r.rays_per_pixel * n_xyz[2] / costs.DRT_ENTRIES_PER_S
             else:
                 c = costs.reconstruction_cost(n, n_images=len(cfg.render.sensors), iterations=r.iterations,
                                               method=r.method)
