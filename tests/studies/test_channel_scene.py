@@ -57,6 +57,38 @@ def test_channel_scene_cameras_and_sheet():
         assert float(v["distance_mm"]) / lnu == pytest.approx(5000.0, rel=1e-3)
         assert float(v["focus_distance_mm"]) == float(v["distance_mm"])  # focused on the mid-plane
         assert [float(x) for x in v["focus_plane_normal"].split(",")] == [0.0, 0.0, 1.0]
-        # voxel / pixel ~ 1: a 10 um pixel sees f / (s - f) -> 10 um / M = 0.63 wall units
-        m = float(v["focal_length_mm"]) / (float(v["distance_mm"]) - float(v["focal_length_mm"]))
-        assert 0.010 / m / lnu == pytest.approx(0.63, rel=REL)
+        # the 52 mm lens at f/16 for the diffraction PSF, its magnification f / (s - f)
+        m = 52.0 / (float(v["distance_mm"]) - 52.0)
+        assert float(v["psf_f_number"]) == 16.0 and float(v["psf_magnification"]) == pytest.approx(m, rel=1e-5)
+
+
+def test_channel_cameras_see_the_designed_pixel_on_the_loaded_sensors(tmp_path):
+    """Measured on the loaded Mitsuba sensors, not read from the XML: a 10 um pixel sees
+    0.63 wall units (19 um) at the volume centre, so voxel / pixel is 1 at l_v+ = 0.63 (the
+    mapping's pinhole distance is the 52 mm lens's image distance, 79.3 mm, not its focal
+    length, which gave 29 um); the aperture is the 52 mm lens's f/16 (3.25 mm); the 120+
+    volume lies inside the 320 px image of every camera."""
+    import itertools
+    import shutil
+
+    import mitsuba as mi
+
+    from mitpiv.io.particles import write_particles_ply
+    from mitpiv.render.variant import ensure_variant
+
+    ensure_variant()
+    shutil.copy(SCENE / "scene.xml", tmp_path / "scene.xml")
+    write_particles_ply(tmp_path / "particles_0.ply", np.zeros((1, 3)), 1.0, proxy_radius_mm=0.005)
+    scene = mi.load_file(str(tmp_path / "scene.xml"), frame=0)
+    lnu = 15.1 / 500.0
+    cfg = load_experiment(SCENE / "experiment.toml")
+    corners = np.array(list(itertools.product(*zip(cfg.seeding.box_min_mm, cfg.seeding.box_max_mm, strict=True))))
+    for s in scene.sensors():
+        cam = s.camera
+        rot = np.asarray(cam.rotation)
+        for axis in (0, 1):
+            uv = cam.project(np.array([[0.0, 0.0, 0.0], 0.5 * rot[axis]]))
+            assert 0.5 / float(np.linalg.norm(uv[1] - uv[0])) / lnu == pytest.approx(0.63, rel=REL)
+        assert 2 * cam.aperture_radius_mm == pytest.approx(52.0 / 16.0, rel=1e-6)
+        uv = cam.project(corners)
+        assert tuple(cam.resolution) == (320, 320) and uv.min() > 0 and uv.max() < 320
