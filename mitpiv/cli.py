@@ -373,7 +373,7 @@ def cmd_reconstruct(args) -> int:
 
     from mitpiv import costs
     from mitpiv.io import write_volume
-    from mitpiv.reconstruct.images import reconstruct_images
+    from mitpiv.reconstruct.images import reconstruct_images, reconstruction_cost_of
     from mitpiv.render.render import write_preview
 
     out = _out_file(args.out, (".npz",))
@@ -387,16 +387,11 @@ def cmd_reconstruct(args) -> int:
         ids = [m.get("sensor_id") for m in metas]
         mappings = mappings_from_calibration(args.calibration, names=ids if all(ids) else None,
                                              resolution=images[0].shape[::-1])
-    cost, fix = (costs.reconstruction_cost(grid.n_voxels, n_images=len(images), iterations=args.iterations,
-                                           method=args.method), "use larger voxels (--voxel-mm) or a smaller volume (--bounds)")
-    if args.method == "drt-mart":  # the ray-traced weights dominate: pixels x rays x slabs
-        from mitpiv.lightfield.decode import optics_from_metadata
-        from mitpiv.reconstruct.plenoptic import drt_cost
-
-        cam = optics_from_metadata(metas[0])
-        if cam is not None:
-            cost = drt_cost(cam, grid, rays_per_pixel=args.rays_per_pixel, iterations=args.iterations)
-            fix += ", fewer --rays-per-pixel, or a smaller light-field image (the weights grow with its pixels)"
+    cost = reconstruction_cost_of(metas, grid, args.method, iterations=args.iterations,
+                                  rays_per_pixel=args.rays_per_pixel)
+    fix = "use larger voxels (--voxel-mm) or a smaller volume (--bounds)" + (
+        ", fewer --rays-per-pixel, or a smaller light-field image (the weights grow with its pixels)"
+        if args.method == "drt-mart" else "")
     costs.check_memory(cost, what=f"reconstruct: --voxel-mm {args.voxel_mm} on --bounds {' '.join(map(str, args.bounds))}",
                        fix=fix)
     logging.getLogger("mitpiv").info("grid %dx%dx%d voxels of %s mm, %d image(s), method %s", grid.shape[2],

@@ -16,6 +16,23 @@ RECONSTRUCT_METHODS = TOMO_METHODS + ("plenoptic", "drt-mart")
 _NO_INDEX = np.zeros(0, dtype=np.int64)  # DRT-MART's cache entry has no active-voxel index
 
 
+def reconstruction_cost_of(metas, grid: VoxelGrid, method: str, *, iterations: int, rays_per_pixel: int = 16):
+    """:class:`mitpiv.costs.Cost` of :func:`reconstruct_images` on images with this metadata:
+    DRT-MART by its ray-traced weights (:func:`~mitpiv.reconstruct.plenoptic.drt_cost`, the
+    first image's plenoptic camera), every other method by its voxels and images
+    (:func:`mitpiv.costs.reconstruction_cost`)."""
+    from mitpiv import costs
+
+    if method == "drt-mart" and metas:
+        from mitpiv.lightfield.decode import optics_from_metadata
+        from mitpiv.reconstruct.plenoptic import drt_cost
+
+        cam = optics_from_metadata(metas[0])
+        if cam is not None:
+            return drt_cost(cam, grid, rays_per_pixel=rays_per_pixel, iterations=iterations)
+    return costs.reconstruction_cost(grid.n_voxels, n_images=len(metas), iterations=iterations, method=method)
+
+
 def reconstruct_images(images, metas, grid: VoxelGrid, method: str = "mart", *, whites=None, iterations: int = 5,
                        mu: float = 1.0, weights: str = "circle", interpolation: str = "linear",
                        preprocess: float | None = None, smooth_px: float = 0.0, floor_rel: float = 0.0,

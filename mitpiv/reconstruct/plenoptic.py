@@ -234,6 +234,11 @@ def _check_camera(camera, what):
     return camera
 
 
+def _stepping_axis(cam: PlenopticCamera) -> int:
+    """The grid axis (0 x, 1 y, 2 z) nearest the camera's optical axis: DRT steps its slabs."""
+    return int(np.argmax(np.abs(cam.to_world_mitsuba[:3, 2])))
+
+
 def drt_weights(camera: PlenopticCamera, grid: VoxelGrid, *, rays_per_pixel: int = 16, substeps: int = 2,
                 pixels=None, seed: int = 0, chunk_pixels: int = 2048, progress: Progress = None):
     """Dense-ray-tracing weights of a plenoptic camera: ``scipy.sparse.csr_matrix`` (pixels x voxels).
@@ -257,7 +262,7 @@ def drt_weights(camera: PlenopticCamera, grid: VoxelGrid, *, rays_per_pixel: int
             raise ConfigError(f"drt_weights: '{name}' must be a positive integer, got {val!r}.")
     w, h = cam.resolution
     pix = np.arange(w * h) if pixels is None else np.asarray(pixels, dtype=np.int64).ravel()
-    axis = int(np.argmax(np.abs(cam.to_world_mitsuba[:3, 2])))  # grid axis nearest the optical axis
+    axis = _stepping_axis(cam)
     others = [a for a in range(3) if a != axis]
     nz, ny, nx = grid.shape
     n_ax = (nx, ny, nz)
@@ -326,8 +331,7 @@ def drt_cost(camera: PlenopticCamera, grid: VoxelGrid, *, rays_per_pixel: int = 
     n = min(int(sample_pixels), w * h)
     pix = np.sort(np.random.default_rng(seed).choice(w * h, size=n, replace=False))
     nnz = drt_weights(cam, grid, rays_per_pixel=rays_per_pixel, substeps=substeps, pixels=pix, seed=seed).nnz
-    axis = int(np.argmax(np.abs(cam.to_world_mitsuba[:3, 2])))  # x, y, z
-    slabs = grid.shape[2 - axis]
+    slabs = grid.shape[2 - _stepping_axis(cam)]
     per_pixel_ray_slab = nnz / (n * rays_per_pixel * slabs)
     return drt_mart_cost(w * h, rays_per_pixel, slabs, iterations=iterations, n_voxels=grid.n_voxels,
                          n_images=n_images, entries_per_pixel_ray_slab=per_pixel_ray_slab)
@@ -345,8 +349,7 @@ def coverage(total, camera: PlenopticCamera, grid: VoxelGrid) -> np.ndarray:
 
     cam = _check_camera(camera, "coverage")
     t = np.asarray(total, dtype=np.float64).reshape(grid.shape)  # (z, y, x)
-    axis_xyz = int(np.argmax(np.abs(cam.to_world_mitsuba[:3, 2])))
-    axis = 2 - axis_xyz  # the (z, y, x) array axis of the stepping direction
+    axis = 2 - _stepping_axis(cam)  # the (z, y, x) array axis of the stepping direction
     lenslet_mm = cam.mla_pitch_um * 1e-3 / abs(cam.magnification)
     size = [max(1, int(round(lenslet_mm / grid.voxel_mm[2 - a]))) for a in range(3)]
     size[axis] = 1

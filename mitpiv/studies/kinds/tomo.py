@@ -540,27 +540,18 @@ def source_of(cfg) -> str:
 
 def stage_reconstruct(ctx: StageContext) -> dict:
     from mitpiv import costs
-    from mitpiv.io import write_volume
-    from mitpiv.reconstruct.images import reconstruct_images
+    from mitpiv.io import read_exr_metadata, write_volume
+    from mitpiv.reconstruct.images import reconstruct_images, reconstruction_cost_of
     from mitpiv.reconstruct.tomo import WeightCache
 
     cfg = ctx.cfg
     r = cfg.reconstruction
     grid = grid_of(cfg)
-    if r.method == "drt-mart":  # the ray-traced weights dominate: pixels x rays x slabs
-        from mitpiv.io import read_exr_metadata
-        from mitpiv.lightfield.decode import optics_from_metadata
-        from mitpiv.reconstruct.plenoptic import drt_cost
-
-        first = sorted((ctx.run_dir / source_of(cfg)).glob("*_frame000.exr"))
-        cam = optics_from_metadata(read_exr_metadata(first[0])) if first else None
-        cost = drt_cost(cam, grid, rays_per_pixel=r.rays_per_pixel, iterations=r.iterations) if cam is not None else \
-            costs.reconstruction_cost(grid.n_voxels, iterations=r.iterations, method=r.method)
-        fix = "use larger voxels, smaller bounds, fewer rays_per_pixel or a smaller light-field sensor (a crop)"
-    else:
-        cost = costs.reconstruction_cost(grid.n_voxels, n_images=len(list((ctx.run_dir / source_of(cfg)).glob(
-            "*_frame000.exr"))), iterations=r.iterations, method=r.method)
-        fix = "use larger voxels or smaller bounds"
+    first = sorted((ctx.run_dir / source_of(cfg)).glob("*_frame000.exr"))
+    cost = reconstruction_cost_of([read_exr_metadata(f) for f in first], grid, r.method, iterations=r.iterations,
+                                  rays_per_pixel=r.rays_per_pixel)
+    fix = "use larger voxels or smaller bounds" + (
+        ", fewer rays_per_pixel or a smaller light-field sensor (a crop)" if r.method == "drt-mart" else "")
     costs.check_memory(cost, what=f"[reconstruction] {r.method} on {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]} "
                        "voxels, per frame", fix=fix)
     info = {}

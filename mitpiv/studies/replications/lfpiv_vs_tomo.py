@@ -310,6 +310,13 @@ def _common_points_correlation(a: dict, b: dict) -> dict:
             "sample_a": np.round(va[keep], 3).tolist(), "sample_b": np.round(vb[keep], 3).tolist()}
 
 
+def _arm_run(ctx, arm: str, overrides: dict, key: str, variant: str = ""):
+    """The replica arm's resumable experiment run ``work/runs/experiment_<arm>[_<variant>]_<key>``
+    (a finished run is read back, nothing recomputed)."""
+    return ctx.run(f"experiment_{arm}_{variant + '_' if variant else ''}{key}", experiment_dir() / "experiment.toml",
+                   overrides)
+
+
 def variant_arms(arms: dict) -> dict[str, dict]:
     """The replica's arms with the jet's mean flow only (``flow.envelope = 0``: no synthetic
     turbulence) and two more PIV passes at each arm's final window: the settings under which
@@ -341,8 +348,7 @@ def experiment_summary(ctx, quick: bool, variant: str = "") -> dict:
     out = {"arms": arms, "key": key, "variant": variant}
     fields = {}
     for arm, ov in arms.items():
-        res = ctx.run(f"experiment_{arm}_{variant + '_' if variant else ''}{key}", experiment_dir() / "experiment.toml",
-                      ov)
+        res = _arm_run(ctx, arm, ov, key, variant)
         m = res.metrics
         piv = m.get("piv") or {}
         fld = read_vector_field(res.run_dir / "piv" / "field.npz")
@@ -416,8 +422,7 @@ def experiment_subwindow(ctx, arms: dict, n_windows: int = 400) -> dict:
     from mitpiv.physics.flows import flow_from_dict
 
     key = _arm_key(arms)
-    exps = {arm: read_json(ctx.run(f"experiment_{arm}_{key}", experiment_dir() / "experiment.toml", arms[arm]).run_dir
-                           / "experiment.json") for arm in ("lf", "tomo")}
+    exps = {arm: read_json(_arm_run(ctx, arm, arms[arm], key).run_dir / "experiment.json") for arm in ("lf", "tomo")}
     b = np.asarray(exps["lf"]["reconstruction"]["bounds_mm"], dtype=float).reshape(3, 2)
     rng = np.random.default_rng(1000 * ctx.seed + 11)
     centres = b[:, 0] + rng.random((int(n_windows), 3)) * (b[:, 1] - b[:, 0])
@@ -444,9 +449,7 @@ def _same_particles(ctx, arms: dict, run_key: str, variant: str = "") -> dict:
 
     out = {}
     for arm in ("lf", "tomo"):
-        # the arm's run (finished by experiment_summary: this resumes it, nothing is recomputed)
-        d = ctx.run(f"experiment_{arm}_{variant + '_' if variant else ''}{run_key}", experiment_dir() / "experiment.toml",
-                    arms[arm]).run_dir
+        d = _arm_run(ctx, arm, arms[arm], run_key, variant).run_dir
         exp = read_json(d / "experiment.json")
         _, grid, _ = read_volume(d / "reconstruct" / "volume_0.npz")
         fd = dict(exp["flow"])
