@@ -628,7 +628,7 @@ def cmd_bench(args) -> int:
 
 
 def cmd_replicate(args) -> int:
-    from mitpiv.studies.replication import get_study, list_studies, replicate
+    from mitpiv.studies.replication import Row, get_study, list_studies, reclassify, replicate, tally_line
 
     if args.list or args.study is None:
         names = list_studies()
@@ -640,15 +640,19 @@ def cmd_replicate(args) -> int:
         if args.study is None and not args.list:
             raise MitpivError("replicate: name a study (see the list above), e.g. mitpiv replicate NAME --quick.")
         return 0
-    if args.out is not None:
-        _out_dir(args.out)
-    res = replicate(args.study, args.out, quick=args.quick, seed=args.seed, workers=args.workers,
-                    progress=_progress(args))
-    rows = res["rows"]
-    n_ok = sum(1 for r in rows if r["agrees"] is True)
-    n_cmp = sum(1 for r in rows if r["agrees"] is not None)
     out = args.out or f"out/replicate/{args.study}{'-quick' if args.quick else ''}"
-    print(f"{args.study} ({res['scale']}): {n_ok}/{n_cmp} rows agree with the paper, {res['wall_s']:.0f} s "
+    if args.reclassify:
+        if args.quick or args.allow_mixed or args.seed or args.workers != 1:
+            raise MitpivError("replicate --reclassify rewrites the results already in --out without computing "
+                              "anything; drop --quick, --seed, --workers and --allow-mixed.")
+        res = reclassify(args.study, out)
+    else:
+        if args.out is not None:
+            _out_dir(args.out)
+        res = replicate(args.study, args.out, quick=args.quick, seed=args.seed, workers=args.workers,
+                        progress=_progress(args), allow_mixed=args.allow_mixed)
+    rows = [Row.from_dict(r) for r in res["rows"]]
+    print(f"{args.study} ({res['scale']}): {tally_line(rows).replace('**', '')}; {res['wall_s']:.0f} s "
           f"-> {out}/report.md, results.json")
     return 0
 
@@ -839,6 +843,10 @@ def main(argv=None) -> int:
     rp.add_argument("--out", default=None, help="output folder (default out/replicate/NAME[-quick]); resumes")
     rp.add_argument("--seed", type=_seed, default=0, help="base seed of every random stream, in [0, 2**63)")
     rp.add_argument("--workers", type=_int_in(1, 512), default=1, help="local Dask worker processes for independent points")
+    rp.add_argument("--allow-mixed", action="store_true",
+                    help="let full-scale results use cached points computed at other commits (said in the report)")
+    rp.add_argument("--reclassify", action="store_true",
+                    help="apply the study's current row kinds to the results already in --out, computing nothing")
     rp.set_defaults(func=cmd_replicate)
     try:
         args = p.parse_args(argv)

@@ -20,12 +20,15 @@ from mitpiv.studies.channel_tomo_sim import (
 from mitpiv.studies.replication import RESULTS_KEYS, replicate
 from mitpiv.studies.replications.channel_tomo import STUDY, cost_estimate, error_decomposition, s_d
 
+from .helpers import assert_second_edition
+
 SYSTEM = ChannelTomoSystem()
 
 
 def test_quick_run_schema_and_ids(tmp_path):
     res = replicate("channel-tomo", tmp_path, quick=True)
     assert set(RESULTS_KEYS) <= set(res)
+    assert_second_edition(res, tmp_path)
     assert res["scale"] == "quick" and res["study"] == "channel-tomo"
     ids = [r["id"] for r in res["rows"]]
     assert len(ids) == len(set(ids))
@@ -166,3 +169,41 @@ def test_error_decomposition_recovers_slope_and_noise():
         assert abs(d[key]["resid"] - noise[c]) < 0.02, (key, d[key])
         assert abs(d[key]["filter_pct"] - 100 * (1 / math.sqrt(1.25) - 1)) < 1.5, (key, d[key])
         assert d[key]["slope_min"] <= d[key]["slope"]
+
+
+# ---------------------------------------------------------------------- row kinds (REPLICATION.md, points 7-8)
+def test_committed_rows_have_kinds():
+    """The study's kinds applied to the committed full results: every declaration matches a
+    row, the rows that restate the Mie factor fitted to Table 2 are inputs, and no physics
+    row reads a result of the paper."""
+    import dataclasses
+    import fnmatch
+    import json
+    from pathlib import Path
+
+    from mitpiv.studies.replication import Row, classify_rows
+    from mitpiv.studies.replications.channel_tomo import INPUTS_FROM_PAPER, KINDS
+
+    f = Path(__file__).resolve().parents[2] / "docs" / "replications" / "channel-tomo" / "results.json"
+    names = {fl.name for fl in dataclasses.fields(Row)} - {"kind", "why", "reads"}  # re-derived from KINDS
+    rows = []
+    for r in json.loads(f.read_text(encoding="utf-8"))["rows"]:
+        d = {k: v for k, v in r.items() if k in names}
+        if d.get("ci") is not None:
+            d["ci"] = tuple(d["ci"])
+        rows.append(Row(**d))
+    assert STUDY.kinds is KINDS and STUDY.inputs_from_paper is INPUTS_FROM_PAPER
+    ids = [r.id for r in rows]
+    for key in KINDS:
+        assert any(i == key or fnmatch.fnmatchcase(i, key) for i in ids), key
+    out = {r.id: r for r in classify_rows(STUDY, rows)}
+    for rid in ("noise_to_peak_forward", "noise_to_peak_backward", "Q_theta_below45_better"):
+        assert out[rid].kind == "input" and out[rid].reads == ("PAPER_TABLE_2",), rid
+    assert out["NI_loss_above_15"].kind == "info"
+    for r in out.values():
+        if r.kind == "physics":
+            assert not r.reads, r.id
+        else:
+            assert r.why.strip(), r.id
+    # the optima decided by single realisations carry their caveat
+    assert "issue 46" in out["Q_max_theta_deg"].why and "issue 46" in out["NI_optimum"].why

@@ -9,6 +9,8 @@ import pytest
 from mitpiv.studies.replication import RESULTS_KEYS, replicate
 from mitpiv.studies.replications.drop_fragments import STUDY
 
+from .helpers import assert_second_edition
+
 # The pellets are 2.0 mm spheres; the plenoptic sizing of the paper's camera at |M| = 0.28
 # (one refocused pixel ~0.14 mm) should land within a pixel or so of it.
 PELLET_D_ATOL_MM = 0.3
@@ -17,6 +19,7 @@ PELLET_D_ATOL_MM = 0.3
 def test_quick_run_schema_and_ids(tmp_path):
     res = replicate("drop-fragments", tmp_path, quick=True)
     assert set(RESULTS_KEYS) <= set(res)
+    assert_second_edition(res, tmp_path)
     assert res["scale"] == "quick" and res["study"] == "drop-fragments"
     ids = [r["id"] for r in res["rows"]]
     assert len(ids) == len(set(ids))
@@ -64,6 +67,42 @@ def test_quick_run_schema_and_ids(tmp_path):
     report = (tmp_path / "report.md").read_text()
     assert all((tmp_path / f).stat().st_size > 10_000 and f"]({f})" in report for f in figs)
     assert "plenoptic_abs_dz_over_d_by_diameter" in res["curves"]
+
+
+def test_committed_rows_are_classified():
+    """The committed full results under the study's kinds (REPLICATION.md, points 7-8):
+    every declared key matches a row; the rows that echo the paper's results used as inputs
+    (196 fragments, the 0.199 mm mean, the scatter solved from Table 2's sd_x) and the
+    truth-based rows set against the paper's estimator are not physics; no physics row
+    reads a declared input; every row computed from the drop-impact fragment field (its id
+    names a condition) reads one."""
+    import dataclasses
+    import json
+    from pathlib import Path
+
+    from mitpiv.studies.replication import Row, classify_rows, unused_kinds
+
+    path = Path(__file__).resolve().parents[2] / "docs" / "replications" / "drop-fragments" / "results.json"
+    names = {f.name for f in dataclasses.fields(Row)}
+    rows = [Row(**{k: v for k, v in r.items() if k in names}) for r in json.loads(path.read_text())["rows"]]
+    assert unused_kinds(STUDY, rows) == []
+    by_id = {r.id: r for r in classify_rows(STUDY, rows)}
+    assert len(by_id) == len(rows)
+    for rid in ("n_found_dih_we784_tau5.1", "model_err_x_mm_we784_tau5.1", "model_err_x_mm_we1051_tau9.0"):
+        assert by_id[rid].kind == "input"
+    for rid in ("model_err_z_mm_we784_tau2.6", "z_uncertainty_quadrature_mm_we784_tau5.1",
+                "plen_true_dz_disp_sd_mm_we784_tau5.1", "plen_true_dz_sd_over_mean_d_we784_tau5.1", "q_we784",
+                "n_found_plenoptic_we784_tau5.1", "shock_bands_dih_not_plenoptic"):
+        assert by_id[rid].kind == "info"
+    assert by_id["plenoptic_dz_theory_mm"].kind == "definition"
+    assert "velocity_scatter" in by_id["model_err_x_mm_we624_tau2.3"].reads
+    assert "n_fragments" in by_id["n_found_dih_we784_tau5.1"].reads
+    for r in by_id.values():
+        assert r.kind != "physics" or not r.reads, r.id
+        if "_we" in r.id:
+            assert r.kind != "physics" and r.reads, r.id
+        assert r.kind == "physics" or r.why.strip(), r.id
+    assert {r.id for r in by_id.values() if r.kind == "physics"} >= {"pellet_mean_d_mm", "pellet_z_sd_over_d"}
 
 
 # Rendered dot cards through the ideal lens: the dots' stack locations in nominal

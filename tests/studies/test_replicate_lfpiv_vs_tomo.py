@@ -13,10 +13,13 @@ from mitpiv.studies import lfpiv_tomo_sim as S
 from mitpiv.studies.replication import RESULTS_KEYS, replicate
 from mitpiv.studies.replications.lfpiv_vs_tomo import STUDY, cost_estimate
 
+from .helpers import assert_second_edition
+
 
 def test_quick_run_schema_and_ids(tmp_path):
     res = replicate("lfpiv-vs-tomo", tmp_path, quick=True)
     assert set(RESULTS_KEYS) <= set(res)
+    assert_second_edition(res, tmp_path)
     assert res["scale"] == "quick" and res["study"] == "lfpiv-vs-tomo"
     ids = [r["id"] for r in res["rows"]]
     assert len(ids) == len(set(ids))
@@ -47,7 +50,8 @@ def test_quick_run_schema_and_ids(tmp_path):
     # the replica's light-field arm drops the field's edge (experiment.toml: min_coverage = 0.75)
     from mitpiv.io.records import read_json
 
-    runs = {p.name.split("_")[2]: p for p in (tmp_path / "work" / "runs").glob("experiment_lf_*")}
+    # experiment runs live under the study's code version (work/runs/<code hash>/)
+    runs = {p.name.split("_")[2]: p for p in (tmp_path / "work" / "runs" / res["code_hash"]).glob("experiment_lf_*")}
     assert "mean4" in runs and len(runs) == 2  # Table 4's and the variant
     stage = read_json(next(p for k, p in runs.items() if k != "mean4") / "reconstruct" / "stage.json")
     assert stage["result"]["frame0"]["edge_voxels_dropped"] > 0
@@ -338,3 +342,48 @@ def test_errors_by_depth_partition_the_scored_vectors():
     np.testing.assert_allclose(d["rms_vox_all"], ref["rms_vox"], rtol=1e-12)
     assert 0 <= d["n_gross_near_focal_plane"] <= min(d["n_gross"], d["n_near_focal_plane"])
     assert d["half_window_mm"] == pytest.approx(0.5 * passes[-1][2] * grid.voxel_mm[2])
+
+
+# ---------------------------------------------------------------------- row kinds (REPLICATION.md, point 7)
+def test_committed_rows_take_the_declared_kinds():
+    """The committed full results classified by the study's KINDS (issue 44): every declaration
+    matches a row, the arithmetic on the paper's tables is definition, the rows the paper has no
+    value for are info, and no physics row is left uncompared or reads a paper result."""
+    import dataclasses
+    import json
+    from pathlib import Path
+
+    from mitpiv.studies.replication import Row, classify_rows, tally, unused_kinds
+    from mitpiv.studies.replications.lfpiv_vs_tomo import INPUTS_FROM_PAPER, KINDS
+
+    committed = Path(__file__).resolve().parents[2] / "docs" / "replications" / "lfpiv-vs-tomo" / "results.json"
+    fields = {f.name for f in dataclasses.fields(Row)}
+    raw = json.loads(committed.read_text())["rows"]
+    rows = [Row(**{k: v for k, v in r.items() if k in fields}) for r in raw]
+    out = {r.id: r for r in classify_rows(STUDY, rows)}
+    assert STUDY.kinds is KINDS and STUDY.inputs_from_paper is INPUTS_FROM_PAPER
+    assert unused_kinds(STUDY, rows) == []
+    # arithmetic on the paper's tables: LTPRs, particle and vector counts, the time normalisation
+    for rid in ("ltpr_low_nc4", "ltpr_high_nc8", "particles_lf_pmr7_low", "particles_lf_pmr28_low",
+                "particles_tomo_ppp0.1", "time_ratio_tomo_nc4_ppp0.05", "experiment_ltpr", "experiment_tomo_vectors",
+                "experiment_lf_vectors_full"):
+        assert out[rid].kind == "definition", rid
+    assert out["experiment_lf_vectors_full"].reads == ("table4_lf_grid",)
+    # the crossings are an ordering of simulated errors (they could fail), with the caveat printed
+    for nc in (4, 6, 8):
+        r = out[f"ltpr_cross_nc{nc}"]
+        assert r.kind == "physics" and "ordering" in r.why
+    for rid in ("w_rms_px_pmr14_high", "lf_xy_pos_error_high_over_low_pmr7", "experiment_lf_outlier_pct",
+                "experiment_lf_tomo_correlation", "time_ratio_lf_pmr14_high"):
+        assert out[rid].kind == "physics", rid
+    # could not have failed: the tomographic time ratios within a factor 3 of 1.01-1.37
+    assert out["time_ratio_tomo_nc8_ppp0.1"].kind == "info"
+    # every row the paper has no value for is info (46 in the committed run)
+    uncompared = [r["id"] for r in raw if r["agrees"] is None]
+    assert len(uncompared) == 46 and all(out[i].kind == "info" for i in uncompared)
+    assert not [i for i, r in out.items() if r.kind == "physics" and r.agrees is None]
+    assert not [i for i, r in out.items() if r.kind == "physics" and r.reads]
+    assert all(r.why.strip() for r in out.values() if r.kind != "physics")
+    counts = {k: sum(r.kind == k for r in out.values()) for k in ("physics", "input", "definition", "info")}
+    assert counts == {"physics": 23, "input": 0, "definition": 18, "info": 52}
+    assert tally(list(out.values())) == {"n": 23, "agree": 14, "disagree": 9, "inconclusive": 0}

@@ -13,6 +13,8 @@ from mitpiv.studies import multiplenoptic_sim as S
 from mitpiv.studies.replication import RESULTS_KEYS, replicate
 from mitpiv.studies.replications.multi_plenoptic import STUDY
 
+from .helpers import assert_second_edition
+
 # float64 sums over ~1e4 voxels: round-off ~1e-13; 1e-12 leaves room.
 EQ_RTOL = 1e-12
 
@@ -20,6 +22,7 @@ EQ_RTOL = 1e-12
 def test_quick_run_schema_and_ids(tmp_path):
     res = replicate("multi-plenoptic", tmp_path, quick=True)
     assert set(RESULTS_KEYS) <= set(res)
+    assert_second_edition(res, tmp_path)
     assert res["scale"] == "quick" and res["study"] == "multi-plenoptic"
     ids = [r["id"] for r in res["rows"]]
     assert len(ids) == len(set(ids)) and set(STUDY.required_ids) <= set(ids)
@@ -146,3 +149,70 @@ def test_scene_is_the_papers_system():
     cfg = load_experiment(root / "experiment.toml")
     assert cfg.reconstruction.voxel_mm == pytest.approx(S.voxel_mm(8.0), abs=1e-4)
     assert cfg.sensor.bit_depth == 16
+
+
+def _committed_rows():
+    import json
+    from dataclasses import fields
+    from pathlib import Path
+
+    from mitpiv.studies.replication import Row
+
+    f = Path(__file__).resolve().parents[2] / "docs" / "replications" / "multi-plenoptic" / "results.json"
+    names = {fl.name for fl in fields(Row)}
+    return [Row(**{k: v for k, v in r.items() if k in names}) for r in json.loads(f.read_text())["rows"]]
+
+
+def test_committed_rows_have_kinds_and_every_cause_is_declared():
+    """Every row of the committed full results gets a kind (issue 44): every KINDS key names a
+    committed row, no physics row compares nothing, no row reads a paper result (the study takes
+    none), the known caveats are in the rows' why, and the physics tally is the one the closing
+    note states."""
+    from mitpiv.studies.replication import classify_rows, tally, unused_kinds
+    from mitpiv.studies.replications.multi_plenoptic import INPUTS_FROM_PAPER, KINDS
+
+    rows = classify_rows(STUDY, _committed_rows())
+    assert unused_kinds(STUDY, rows) == [] and set(KINDS) <= {r.id for r in rows}
+    assert STUDY.kinds is KINDS and dict(STUDY.inputs_from_paper) == INPUTS_FROM_PAPER == {}
+    by = {r.id: r for r in rows}
+    assert not [r.id for r in rows if r.kind == "physics" and r.agrees is None]
+    assert all(not r.reads for r in rows)
+    assert "plateau" in by["best_angle_deg"].why and "25 to 50 deg" in by["best_angle_deg"].why
+    assert "MART f/20 is clearly better" in by["Qstar_plenoptic2_minus_mart_f20"].why
+    # one-cell comparisons whose cell agrees while the committed sweep does not are not counted
+    for i in ("z_unc_ratio_1cam_over_2cam", "best_angle_deg", "Qstar_plenoptic2_minus_mart_f20",
+              "So_pM_optimum_gamma_typical"):
+        assert by[i].kind == "info", i
+    # every disagreement has its cause
+    assert all(r.why for r in rows if r.agrees is False)
+    assert tally(rows) == {"n": 12, "agree": 9, "disagree": 3, "inconclusive": 0}
+
+
+def test_a_passing_rows_cause_reaches_the_report(tmp_path):
+    """The causes are printed with every row, pass or fail (they used to be printed for failing
+    rows only): reclassifying the committed results writes a report that carries the causes of
+    passing rows; the study's own section no longer filters causes by failure."""
+    import shutil
+    from pathlib import Path
+
+    from mitpiv.studies.replication import classify_rows, reclassify
+    from mitpiv.studies.replications.multi_plenoptic import KINDS, _causes
+
+    src = Path(__file__).resolve().parents[2] / "docs" / "replications" / "multi-plenoptic"
+    for name in ("results.json", "report.md"):
+        shutil.copy(src / name, tmp_path / name)
+    reclassify("multi-plenoptic", tmp_path)
+    md = (tmp_path / "report.md").read_text()
+    assert md.startswith("**9 of 12 physics rows agree, 3 disagree")
+    rows = {r.id: r for r in _committed_rows()}
+    for i in ("best_angle_deg", "Qstar_plenoptic2_minus_mart_f20", "Qstar_plenoptic2_minus_mart_f2"):
+        assert rows[i].agrees is True
+        assert KINDS[i].why in md, i  # a passing row's cause, printed with it
+    assert "caveat: " + KINDS["Qstar_plenoptic2_minus_mart_f2"].why in md  # a passing physics row's caveat
+    # the study's section names only disagreements without a declared cause
+    section = _causes(classify_rows(STUDY, list(rows.values())))
+    assert "no investigated cause" not in section
+    from dataclasses import replace
+
+    assert "Q_minus_Qstar_ppp0.3" not in KINDS  # a row with no declared cause, were it to disagree
+    assert "`Q_minus_Qstar_ppp0.3`" in _causes([replace(rows["Q_minus_Qstar_ppp0.3"], agrees=False, verdict=None)])

@@ -16,6 +16,8 @@ from mitpiv.studies.replication import RESULTS_KEYS, replicate
 from mitpiv.studies.replications.sapiv_distortion import PAPER_TABLE_3_1, STUDY
 from mitpiv.studies.sapiv_sim import SapivSystem, locate_dots, render_dot_windows
 
+from .helpers import assert_second_edition
+
 #: Table 3.1 is printed to 2 decimals (and 0.5 %, r_n = 0.1 reads 0.03 for 0.0354: truncated)
 TABLE_ROUNDING_PX = 0.0051 + 0.005
 
@@ -23,6 +25,7 @@ TABLE_ROUNDING_PX = 0.0051 + 0.005
 def test_quick_run_schema_and_ids(tmp_path):
     res = replicate("sapiv-distortion", tmp_path, quick=True)
     assert set(RESULTS_KEYS) <= set(res)
+    assert_second_edition(res, tmp_path)
     assert res["scale"] == "quick" and res["study"] == "sapiv-distortion"
     ids = [r["id"] for r in res["rows"]]
     assert len(ids) == len(set(ids))
@@ -223,3 +226,27 @@ def test_kernel_table_refuses_bad_kernels(bad):
 
     with pytest.raises(ConfigError, match="kernel"):
         PointPSFTable.from_kernel(bad)
+
+
+# ---------------------------------------------------------------------- row kinds (REPLICATION.md, point 7)
+def test_committed_rows_take_the_declared_kinds():
+    """The committed full results classified by the study's KINDS: every declaration matches a
+    row, the audit's findings hold (issue 44) and no physics row is left uncompared."""
+    import dataclasses
+    import json
+    from pathlib import Path
+
+    from mitpiv.studies.replication import Row, classify_rows, unused_kinds
+    from mitpiv.studies.replications.sapiv_distortion import INPUTS_FROM_PAPER, KINDS
+
+    committed = Path(__file__).resolve().parents[2] / "docs" / "replications" / "sapiv-distortion" / "results.json"
+    fields = {f.name for f in dataclasses.fields(Row)}
+    rows = [Row(**{k: v for k, v in r.items() if k in fields}) for r in json.loads(committed.read_text())["rows"]]
+    out = {r.id: r for r in classify_rows(STUDY, rows)}
+    assert STUDY.kinds is KINDS and STUDY.inputs_from_paper is INPUTS_FROM_PAPER
+    assert unused_kinds(STUDY, rows) == []
+    assert out["shift_D2_rn1"].kind == "definition"
+    assert out["Q_D1"].kind != "physics" and out["Q_D2"].kind != "physics"
+    assert out["Q_SA0.1_paperpsf"].kind == "input" and set(out["Q_SA0.1_paperpsf"].reads) <= set(INPUTS_FROM_PAPER)
+    assert not [i for i, r in out.items() if r.kind == "physics" and r.agrees is None]
+    assert all(r.why.strip() for r in out.values() if r.kind != "physics")

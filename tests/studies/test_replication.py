@@ -14,16 +14,21 @@ import pytest
 
 from mitpiv.cli import main
 from mitpiv.errors import ConfigError
-from mitpiv.studies import replications
+from mitpiv.studies import replication, replications
 from mitpiv.studies.replication import (
     RESULTS_KEYS,
     Curve,
+    Kind,
     ReplicationResult,
     Row,
     Study,
+    classify_rows,
     compare_trend,
     compare_value,
+    reclassify,
     replicate,
+    tally,
+    tally_line,
 )
 
 CALLS: list[int] = []
@@ -59,7 +64,8 @@ def _run(ctx):
 
 
 TOY = Study(name="toy", paper="none.txt", title="Toy study", run=_run,
-            required_ids=("mean_n2", "mean_n4", "rising"))
+            required_ids=("mean_n2", "mean_n4", "rising"),
+            kinds={"cached": Kind("info", why="a stored constant, shown for context")})
 
 
 @pytest.fixture
@@ -84,13 +90,22 @@ def test_results_and_report_follow_the_contract(toy, tmp_path):
     assert rows["mean_n4"]["agrees"] is False and rows["mean_n4"]["ours"] == 2.5
     assert "±0.05" in rows["mean_n4"]["tolerance"] and "a wrong paper value" in rows["mean_n4"]["tolerance"]
     assert rows["rising"]["agrees"] is True and rows["cached"]["agrees"] is None
+    assert rows["cached"]["kind"] == "info" and rows["mean_n2"]["kind"] == "physics"
+    assert rows["mean_n4"]["verdict"] == "disagrees" and rows["mean_n2"]["n"] == 1 and rows["mean_n2"]["ci"] is None
+    assert res["tally"]["paper-model"] == {"n": 3, "agree": 2, "disagree": 1, "inconclusive": 0}
     assert res["curves"]["mean"] == {"x": [2, 4], "y": {"ours": [1.5, 2.5]}, "x_label": "n", "y_label": "mean",
                                      "paper": {"paper": [1.5, 2.5]}, "paper_x": [2, 4]}
     md = (tmp_path / "q" / "report.md").read_text()
-    assert "| `mean_n4` |" in md and "**no**" in md and "2 of 3 compared rows agree" in md
+    assert md.splitlines()[0] == ("**2 of 3 physics rows agree, 1 disagree, 0 inconclusive (arm paper-model)**; "
+                                  "not counted: 0 input, 0 definition, 1 info rows")
+    assert "| `mean_n4` |" in md and "**no**" in md
+    # the info row sits in the table of rows not counted, with its reason
+    apart = md.split("## Rows not counted", 1)[1]
+    assert "| `cached` | info |" in apart and "a stored constant" in apart and "| `mean_n2` |" not in apart
     assert "![mean.png](mean.png)" in md and (tmp_path / "q" / "mean.png").stat().st_size > 1000
     assert "--quick" in res["command"]
-    assert res["points"] == {"computed": 3, "from_cache": 0} and "read back" not in md
+    assert (res["points_computed"], res["points_cached"], res["cached_point_commits"]) == (3, 0, {})
+    assert "read back" not in md and res["mixed_commits"] is False
 
 
 def test_points_resume_from_the_cache(toy, tmp_path):
@@ -102,7 +117,9 @@ def test_points_resume_from_the_cache(toy, tmp_path):
     res = json.loads((tmp_path / "r" / "results.json").read_text())
     assert res["scale"] == "full" and res["curves"]["mean"]["y"]["ours"] == [1.5, 2.5, 4.5]
     # n=8 computed; n=2, n=4 and the "once" value read back: the report says so beside the wall time
-    assert res["points"] == {"computed": 1, "from_cache": 3}
+    assert (res["points_computed"], res["points_cached"]) == (1, 3)
+    assert set(res["cached_point_commits"]) == {"n2", "n4", "once"}
+    assert set(res["cached_point_commits"].values()) == {res["commit"]}
     assert "1 points computed by this run, 3 read back" in (tmp_path / "r" / "report.md").read_text()
 
 
@@ -125,7 +142,7 @@ def test_cli_names_unknown_studies_and_lists(toy, tmp_path, capsys):
     assert main(["replicate", "--list"]) == 0
     assert "toy" in capsys.readouterr().out
     assert main(["-q", "replicate", "toy", "--quick", "--out", str(tmp_path / "c")]) == 0
-    assert "2/3 rows agree" in capsys.readouterr().out
+    assert "2 of 3 physics rows agree, 1 disagree, 0 inconclusive" in capsys.readouterr().out
     (tmp_path / "f").write_text("x")
     assert main(["replicate", "toy", "--out", str(tmp_path / "f")]) == 2
     assert "is a file" in capsys.readouterr().err
@@ -138,5 +155,206 @@ def test_map_on_dask_workers_gives_the_same_results(toy, tmp_path):
     got = ctx.map(_point, [2, 4, 8], key=lambda n: f"n{n}")
     assert got == [{"n": 2, "mean": 1.5}, {"n": 4, "mean": 2.5}, {"n": 8, "mean": 4.5}]
     assert sorted(p.name for p in (tmp_path / "work" / "cache").iterdir()) == ["n2.json", "n4.json", "n8.json"]
+    stored = json.loads((tmp_path / "work" / "cache" / "n8.json").read_text())
+    assert stored["result"] == {"n": 8, "mean": 4.5} and stored["_point"]["key"] == "n8"
     with pytest.raises(ConfigError, match="unique"):
         ctx.map(_point, [2, 2], key=lambda n: "same")
+
+
+# ------------------------------------------------------------------------------ second edition (points 7-12)
+def test_a_point_cached_by_other_code_is_computed_again(toy, tmp_path, monkeypatch):
+    replicate("toy", tmp_path / "s", quick=True)
+    CALLS.clear()
+    replicate("toy", tmp_path / "s", quick=True)
+    assert CALLS == []  # same code: read back
+    monkeypatch.setattr(replication, "code_hash", lambda module: "0123456789abcdef")
+    res = replicate("toy", tmp_path / "s", quick=True)
+    assert sorted(CALLS) == [2, 4]  # other code: computed again, never read back
+    assert (res["points_computed"], res["points_cached"]) == (3, 0) and res["code_hash"] == "0123456789abcdef"
+    # a cache file of the format before code versions is computed again too
+    f = tmp_path / "s" / "work" / "cache" / "n2.json"
+    f.write_text(json.dumps({"n": 2, "mean": 99.0}))
+    CALLS.clear()
+    res = replicate("toy", tmp_path / "s", quick=True)
+    assert CALLS == [2] and {r["id"]: r["ours"] for r in res["rows"]}["mean_n2"] == 1.5
+
+
+def test_full_results_that_mix_commits_are_refused(toy, tmp_path, monkeypatch):
+    monkeypatch.setattr(replication, "_commit", lambda: "aaaaaaaaaaaa")
+    replicate("toy", tmp_path / "m", quick=True)
+    monkeypatch.setattr(replication, "_commit", lambda: "bbbbbbbbbbbb")
+    with pytest.raises(ConfigError, match=r"aaaaaaaaaaaa.*--allow-mixed"):
+        replicate("toy", tmp_path / "m", quick=False)
+    # nothing written: the quick run's results are still there
+    assert json.loads((tmp_path / "m" / "results.json").read_text())["scale"] == "quick"
+    res = replicate("toy", tmp_path / "m", quick=False, allow_mixed=True)
+    assert res["mixed_commits"] is True and res["cached_point_commits"]["n2"] == "aaaaaaaaaaaa"
+    assert "Mixed code versions" in (tmp_path / "m" / "report.md").read_text()
+    # a quick run may mix (it is never committed as the result)
+    assert replicate("toy", tmp_path / "m", quick=True)["mixed_commits"] is True
+
+
+def _rows():
+    return [compare_value("a", "a", "s", 1.0, 1.0, rel=0.1), compare_value("b", "b", "s", 1.0, 2.0, rel=0.1),
+            compare_value("c", "c", "s", 196, 196, abs=0.5), Row("d", "d", "s", None, 3.0)]
+
+
+def test_a_physics_row_may_not_read_a_paper_result():
+    study = Study(name="t", paper="p", title="t", run=_run, inputs_from_paper={"n_dih": "196 fragments (Sec. VI)"},
+                  kinds={"c": Kind("physics", reads=("n_dih",)), "d": Kind("info", why="context")})
+    with pytest.raises(ConfigError, match=r"'c' is a physics row but its value reads .*n_dih.*Kind\('input'"):
+        classify_rows(study, _rows())
+    ok = Study(name="t", paper="p", title="t", run=_run, inputs_from_paper={"n_dih": "196 fragments (Sec. VI)"},
+               kinds={"c": Kind("input", why="the paper's count, released", reads=("n_dih",)),
+                      "d": Kind("info", why="context")})
+    rows = classify_rows(ok, _rows())
+    assert [r.kind for r in rows] == ["physics", "physics", "input", "info"]
+    # the input row agrees (it echoes the paper) but is not counted
+    assert tally(rows) == {"n": 2, "agree": 1, "disagree": 1, "inconclusive": 0}
+    for kinds, match in [({"c": Kind("input", why="x", reads=("undeclared",))}, "does not declare"),
+                         ({"c": Kind("definition")}, "without a reason"),
+                         ({}, "'d' is a physics row but compares nothing")]:
+        with pytest.raises(ConfigError, match=match):
+            classify_rows(Study(name="t", paper="p", title="t", run=_run, inputs_from_paper={"n_dih": "x"},
+                                kinds={"d": Kind("info", why="c"), **kinds} if kinds else {}), _rows())
+    # patterns: an exact id wins over a pattern; the first matching pattern otherwise
+    st = Study(name="t", paper="p", title="t", run=_run,
+               kinds={"*": Kind("info", why="all"), "b": Kind("definition", why="exact")})
+    assert [r.kind for r in classify_rows(st, _rows())] == ["info", "definition", "info", "info"]
+    with pytest.raises(ConfigError, match="kind 'nonsense'"):
+        Kind("nonsense")
+
+
+def test_the_tally_counts_physics_rows_only():
+    rows = [*_rows()[:3], Row("d", "d", "s", None, 3.0, kind="info", why="x"),
+            Row("e", "e", "s", 1.0, 1.0, agrees=True, kind="definition", why="x"),
+            Row("f", "f", "s", 1.0, 5.0, verdict="inconclusive", arm="physical")]
+    assert tally_line(rows) == ("**2 of 3 physics rows agree, 1 disagree, 0 inconclusive (arm paper-model); 0 of 1 "
+                                "physics rows agree, 0 disagree, 1 inconclusive (arm physical)**; not counted: "
+                                "0 input, 1 definition, 1 info rows")
+    assert tally(rows, "physical") == {"n": 1, "agree": 0, "disagree": 0, "inconclusive": 1}
+
+
+def test_intervals_and_the_three_valued_verdict():
+    from scipy import stats
+
+    x = [0.98, 1.03, 1.01, 0.97, 1.02]
+    r = compare_value("q", "q", "s", 1.0, x, rel=0.1)
+    # Student-t interval of the mean, written afresh
+    m, s = sum(x) / 5, (sum((v - sum(x) / 5) ** 2 for v in x) / 4) ** 0.5
+    half = stats.t.ppf(0.975, 4) * s / 5**0.5
+    assert r.n == 5 and r.ci_method == "t" and r.ours == pytest.approx(m, rel=1e-12)
+    assert r.ci == pytest.approx((m - half, m + half), rel=1e-12) and r.verdict == "agrees" and r.agrees is True
+    # the interval misses the band: disagrees
+    assert compare_value("q", "q", "s", 1.5, x, rel=0.1).verdict == "disagrees"
+    # an interval wider than the band that straddles its edge: inconclusive, neither agrees nor disagrees
+    wide = [0.6, 1.5, 0.9, 1.4, 0.7]
+    r = compare_value("q", "q", "s", 1.2, wide, abs=0.05)
+    assert r.verdict == "inconclusive" and r.agrees is None
+    # one value is judged as a point, without an interval
+    r = compare_value("q", "q", "s", 1.0, 1.05, rel=0.1)
+    assert (r.verdict, r.n, r.ci) == ("agrees", 1, None)
+    # a trend's statistic per realisation against a one-sided band ('rises': > 0)
+    assert compare_trend("t", "t", "s", "rises", "rises", samples=[0.2, 0.3, 0.25], lower=0).verdict == "agrees"
+    assert compare_trend("t", "t", "s", "rises", "flat", samples=[0.2, -0.3, 0.05], lower=0).verdict == "inconclusive"
+    assert compare_trend("t", "t", "s", "rises", "falls", samples=[-0.2, -0.3, -0.25], lower=0).verdict == "disagrees"
+    with pytest.raises(ConfigError, match="not both"):
+        compare_trend("t", "t", "s", "rises", "x", True, samples=[1.0, 2.0], lower=0)
+    with pytest.raises(ConfigError, match="band"):
+        compare_trend("t", "t", "s", "rises", "x", samples=[1.0, 2.0])
+    # a bootstrap interval: seeded, so the same samples give the same interval, and it holds the mean
+    b1 = compare_value("q", "q", "s", 1.0, x, rel=0.1, ci_method="bootstrap")
+    b2 = compare_value("q", "q", "s", 1.0, x, rel=0.1, ci_method="bootstrap")
+    assert b1.ci == b2.ci and b1.ci[0] < m < b1.ci[1] and b1.ci_method == "bootstrap"
+    # a realisation without a finite value never agrees
+    r = compare_value("q", "q", "s", 1.0, [1.0, float("nan"), 1.0], rel=0.1)
+    assert r.verdict == "disagrees" and r.ours is None and "1 of 3 realisation(s)" in r.note
+
+
+def test_the_code_hash_follows_the_modules_a_point_imports(tmp_path, monkeypatch):
+    pkg = tmp_path / "mitpiv"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "study.py").write_text("import numpy\nfrom .sub import model\n\ndef f():\n    from mitpiv import helper\n")
+    (pkg / "sub" / "model.py").write_text("X = 1\n")
+    (pkg / "helper.py").write_text("from mitpiv.studies import replication\n")
+    (pkg / "unrelated.py").write_text("Y = 2\n")
+    monkeypatch.setattr(replication, "_PKG_ROOT", pkg)
+    assert replication.code_modules("mitpiv.study") == ["mitpiv", "mitpiv.helper", "mitpiv.study", "mitpiv.sub",
+                                                        "mitpiv.sub.model"]
+    h = replication.code_hash("mitpiv.study")
+    (pkg / "unrelated.py").write_text("Y = 3\n")
+    assert replication.code_hash("mitpiv.study") == h
+    (pkg / "sub" / "model.py").write_text("X = 2\n")  # a module the study imports inside a package
+    assert replication.code_hash("mitpiv.study") != h
+
+
+def test_the_real_studies_hash_their_image_models():
+    mods = replication.code_modules("mitpiv.studies.replications.sapiv_distortion")
+    assert {"mitpiv.studies.sapiv_sim", "mitpiv.reconstruct.sapiv", "mitpiv.analysis.quality"} <= set(mods)
+    assert "mitpiv.studies.replication" not in mods  # the writer's changes do not invalidate points
+
+
+def test_reclassify_rewrites_earlier_results_without_computing(toy, tmp_path, monkeypatch):
+    replicate("toy", tmp_path / "k", quick=True)
+    f = tmp_path / "k" / "results.json"
+    old = json.loads(f.read_text())
+    # an earlier writer's results: no kinds, a report without the section markers
+    for r in old["rows"]:
+        for k in ("kind", "why", "reads", "verdict", "ci", "n", "ci_method", "arm"):
+            r.pop(k)
+    f.write_text(json.dumps(old))
+    (tmp_path / "k" / "report.md").write_text(
+        "# Replication: Toy\n\n- Agreement: 2 of 3\n\n## Paper vs ours\n\n| id |\n|---|\n| `a` |\n\n"
+        "## Method\n\nThe mean of 1..n.\n\n## Figures\n\n![mean.png](mean.png)\n")
+    monkeypatch.setattr(replication, "_commit", lambda: "cccccccccccc")
+    CALLS.clear()
+    new_study = Study(name="toy", paper="none.txt", title="Toy study", run=_run, required_ids=TOY.required_ids,
+                      kinds={"cached": Kind("info", why="a stored constant"),
+                             "mean_n4": Kind("definition", why="arithmetic")})
+    monkeypatch.setattr(sys.modules["mitpiv_toy_study"], "STUDY", new_study)
+    res = reclassify("toy", tmp_path / "k")
+    assert CALLS == []  # nothing computed
+    rows = {r["id"]: r for r in res["rows"]}
+    assert rows["mean_n4"]["kind"] == "definition" and rows["mean_n4"]["ours"] == 2.5
+    assert res["classified_by"] == "cccccccccccc" and res["computed_by"] == old["commit"]
+    md = (tmp_path / "k" / "report.md").read_text()
+    assert md.startswith("**2 of 2 physics rows agree, 0 disagree, 0 inconclusive (arm paper-model)**")
+    assert "The mean of 1..n." in md and "![mean.png](mean.png)" in md and "no point recomputed" in md
+    # the new report reclassifies again to the same text (its sections are marked)
+    assert reclassify("toy", tmp_path / "k") and (tmp_path / "k" / "report.md").read_text() == md
+    stale = Study(name="toy", paper="none.txt", title="t", run=_run, kinds={"gone_*": Kind("info", why="x"),
+                                                                            "cached": Kind("info", why="x")})
+    monkeypatch.setattr(sys.modules["mitpiv_toy_study"], "STUDY", stale)
+    with pytest.raises(ConfigError, match="gone_"):
+        reclassify("toy", tmp_path / "k")
+    with pytest.raises(ConfigError, match="no results.json"):
+        reclassify("toy", tmp_path / "empty")
+
+
+@pytest.mark.parametrize("name", ["channel-tomo", "drop-fragments", "lfpiv-vs-tomo", "multi-plenoptic",
+                                  "sapiv-distortion"])
+def test_the_committed_results_carry_the_studies_kinds_and_the_generated_tally(name):
+    from pathlib import Path
+
+    from mitpiv.studies.replication import KINDS, get_study
+
+    folder = Path(__file__).resolve().parents[2] / "docs" / "replications" / name
+    d = json.loads((folder / "results.json").read_text())
+    assert d["study"] == name and all(r["kind"] in KINDS for r in d["rows"])
+    rows = [Row.from_dict(r) for r in d["rows"]]
+    # the committed kinds are the study's declarations today (rows made afresh from the numbers alone)
+    study = get_study(name)
+    bare = [Row(**{k: v for k, v in r.__dict__.items() if k not in ("kind", "why", "reads")}) for r in rows]
+    assert [(r.kind, r.why, r.reads) for r in classify_rows(study, bare)] == [(r.kind, r.why, r.reads) for r in rows]
+    assert not replication.unused_kinds(study, rows)
+    assert not [r.id for r in rows if r.kind == "physics" and (r.reads or r.verdict == "not compared")]
+    md = (folder / "report.md").read_text()
+    assert md.splitlines()[0] == tally_line(rows)
+    assert d["tally"]["paper-model"] == tally(rows, "paper-model")
+    # every row's note and every non-physics row's reason is in the report, pass or fail
+    for r in rows:
+        for text in (r.note, r.why):
+            if text:
+                assert text.replace("|", "\\|").replace("\n", " ") in md, (r.id, text[:60])

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mitpiv.studies.replication import Curve, ReplicationResult, Row, Study, compare_trend, compare_value
+from mitpiv.studies.replication import Curve, Kind, ReplicationResult, Row, Study, compare_trend, compare_value
 
 DT_DROP_S = 150e-6  # "two short light pulses ... 150 us apart"
 DT_PELLET_S = 5e-6  # "an interframe time of 5 us"
@@ -1226,6 +1226,86 @@ def _num(v):
     return math.nan if v is None else float(v)
 
 
+#: The paper's results the fragment model takes as inputs (REPLICATION.md, point 8): every
+#: row computed from the drop-impact fragment field reads them, so none of those is physics.
+INPUTS_FROM_PAPER = {
+    "n_fragments": "196 fragments released per realisation: the DIH count of Sec. VI.A.1, which "
+                   "n_found_dih_we784_tau5.1 should predict; it also sets the field's density (overlaps, pairing)",
+    "mean_diameter": "mean fragment diameter 0.199 mm at every We and tau (FRAGMENT_LAW: q = 0.199 / 3.30, n = 0): the "
+                     "paper's plenoptic mean measured diameter at We 784, tau 5.1 (Sec. VI.A.1), which the size rows "
+                     "should predict; it sets which fragments are resolved and their depth errors",
+    "velocity_scatter": "the film-plane velocity scatter of each condition, solved so that the true field's x model "
+                        "error equals Table 2's sd_x (velocity_sd_for_model_error(..., PAPER_TABLE_2[c][0])) and drawn "
+                        "alike in x and z: Table 2's x column, which model_err_x_mm_* should predict",
+}
+_FIELD = ("n_fragments", "mean_diameter", "velocity_scatter")  # rows from matched pairs of the fragment field
+_SIZES = ("n_fragments", "mean_diameter")  # rows from single-exposure detections of the fragment field
+#: Row kinds (REPLICATION.md, point 7); rows not listed are physics.
+KINDS = {
+    "n_found_dih_we784_tau5.1": Kind(
+        "input", "The model releases the paper's DIH count (196) and DIH finds nearly all of those in its crop: the "
+        "row echoes the input and measures only DIH's detection rate.", _SIZES),
+    "n_found_plenoptic_we784_tau5.1": Kind(
+        "info", "How many of the 196 fragments released (the paper's DIH count) are found depends on their sizes, set "
+        "from the paper's 0.199 mm plenoptic mean: not a prediction until count and size law are independent.", _SIZES),
+    "z_uncertainty_mm_we784_tau5.1": Kind(
+        "info", "The paper's estimator (sd_z - sd_x) on our pairs, but both terms carry the flow scatter set from "
+        "Table 2's sd_x, on fragments of the paper's count and mean size.", _FIELD),
+    "z_uncertainty_quadrature_mm_we784_tau5.1": Kind(
+        "info", "Like with like (Table 2 and ours, both in quadrature), and the quadrature removes most of the input "
+        "scatter, but the pairs and the fragments' count and sizes still come from the paper's results.", _FIELD),
+    "plen_true_dz_disp_sd_mm_we784_tau5.1": Kind(
+        "info", "Truth-based (the paper had no truth) and set against the paper's linear estimator 0.148 mm: unlike "
+        "with like (point 11); context for the two estimator rows.", _FIELD),
+    "plen_true_dx_disp_sd_mm_we784_tau5.1": Kind(
+        "info", "Truth-based check of the paper's assumption (negligible x error), not of a measured value; its size "
+        "is set by wrong pairs, whose share follows from the scatter, count and sizes taken from the paper.", _FIELD),
+    "plen_true_dz_sd_over_mean_d_we784_tau5.1": Kind(
+        "info", "Truth-based, over our mean measured diameter of fragments sized from the paper's 0.199 mm, against "
+        "the paper's linear estimate 0.148 / 0.199: unlike with like (point 11).", _FIELD),
+    "dewarp_pre_z_err_mm": Kind(
+        "physics", "Set by the main lens's radial distortion (k1 = 0.3), which the paper does not state: our choice, "
+        "and the value scales with it."),
+    "dih_depth_sd_over_mean_d_we784_tau5.1": Kind(
+        "info", "Truth-based DIH depth error against [27]'s velocity-symmetry estimate: unlike with like (point 11); "
+        "the fragments' count and sizes (overlaps, d^2/lambda) come from the paper's results.", _SIZES),
+    "dih_z_unc_over_mean_d_we784_tau5.1": Kind(
+        "info", "[27]'s estimator on our DIH pairs (like with like), but the pairs carry the flow scatter set from "
+        "Table 2's sd_x, on fragments of the paper's count and mean size.", _FIELD),
+    "plenoptic_dz_theory_mm": Kind(
+        "definition", "Eq. 22 evaluated with the paper's camera parameters: a check of the paper's closed form and "
+        "arithmetic, not a prediction of the simulation."),
+    "shock_bands_dih_not_plenoptic": Kind(
+        "info", "The plenoptic half holds by construction (the render has no refractive-index field); the DIH half "
+        "only shows the shock phase screens imprint on a coherent beam, against our 5 % threshold."),
+    "pellet_mean_d_mm": Kind(
+        "physics", "The pellets are the manufacturer's 2.0 mm (set-up, not the paper's result), already inside the "
+        "band: the row tests only that the sizing bias lies between about -2 % and +20 %."),
+    "pellet_z_sd_over_d": Kind(
+        "physics", "No z motion, break-screen debris or overlapping pellets are modelled and the pellet speed (400 "
+        "m/s) is assumed: ours is the depth error's spread alone."),
+    "dih_focus_bias_over_d": Kind(
+        "info", "Neither the paper nor [27] reports it: a diagnosis of the DIH depth bias, one disc at a time."),
+    "model_err_x_mm_*": Kind(
+        "input", "The flow scatter is solved so that the true field's x model error equals this Table 2 value: the "
+        "row checks only that our x measurement adds little to it.", _FIELD),
+    "model_err_z_mm_*": Kind(
+        "info", "The flow scatter (set from Table 2's sd_x, drawn alike in z) plus our depth error: the true field "
+        "alone comes close to sd_x, which nearly equals Table 2's sd_z at early tau; not a prediction of sd_z.",
+        _FIELD),
+    "q_we*": Kind(
+        "info", "The paper prints no value, and the size law is a placeholder from the paper's 0.199 mm mean (q = "
+        "0.0603, n = 0): the row measures our detection and sizing of that law.", _SIZES),
+    "n_we*": Kind(
+        "info", "The paper prints no value, and the size law is a placeholder from the paper's 0.199 mm mean (q = "
+        "0.0603, n = 0): the row measures our detection and sizing of that law.", _SIZES),
+    "vr_n_we*": Kind(
+        "info", "The decrease is built into the fragment model (rim speed ~ tau_e^-1/2, Yarin & Weiss): the sign "
+        "tests only that the pairing keeps it, on pairs shaped by the scatter, count and sizes from the paper.",
+        _FIELD),
+}
+
+
 STUDY = Study(
     name="drop-fragments",
     paper="003_c92dce90627d9ea9.txt",
@@ -1234,4 +1314,6 @@ STUDY = Study(
     required_ids=("n_found_dih_we784_tau5.1", "n_found_plenoptic_we784_tau5.1", "model_err_x_mm_we784_tau5.1",
                   "model_err_z_mm_we784_tau5.1", "pellet_z_sd_over_d", "pellet_mean_d_mm", "q_we784", "n_we784"),
     describe="plenoptic vs DIH: drop-impact fragments (We 624-1051) and shotgun pellets (skeleton)",
+    kinds=KINDS,
+    inputs_from_paper=INPUTS_FROM_PAPER,
 )

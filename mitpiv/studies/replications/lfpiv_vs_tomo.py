@@ -27,7 +27,7 @@ import numpy as np
 
 from mitpiv.errors import ConfigError
 from mitpiv.studies.lfpiv_tomo_sim import MIN_COVERAGE as S_MIN_COVERAGE
-from mitpiv.studies.replication import Curve, ReplicationResult, Row, Study, compare_trend, compare_value
+from mitpiv.studies.replication import Curve, Kind, ReplicationResult, Row, Study, compare_trend, compare_value
 
 log = logging.getLogger(__name__)
 
@@ -1243,6 +1243,93 @@ def _method(sc, R, conv, est_full, est_quick, ctx) -> str:
     )
 
 
+#: results of the paper used as model inputs (REPLICATION.md, point 8). The simulation's
+#: set-up is the paper's (Tables 1, 2 and 4: sensors, MLA resolutions, seeding, windows,
+#: grids) and none of its results (errors, crossings, counts, times, outlier rates, the
+#: correlation) feeds a computed point: they are comparators only. The one paper number a row
+#: is computed from without the simulation:
+INPUTS_FROM_PAPER = {
+    "table4_lf_grid": "Table 4's light-field reconstruction grid, 3300 x 2200 x 182 voxels (PAPER_EXP_LF_GRID, the "
+                      "paper's whole sensor at 2:2:10): experiment_lf_vectors_full counts its windows; our run "
+                      "reconstructs a crop and never uses it",
+}
+
+_INFO_FIG8 = Kind("info", "Fig. 8 plots it but the text gives no number; shown for context (the one number, w at PMR "
+                  "14 and high LTPR, is the physics row w_rms_px_pmr14_high).")
+_DIAGNOSIS = Kind("info", "A diagnosis of our light-field PIV errors (edge, iterations, ideal volumes, seeding, "
+                  "turbulence, passes, sub-window motion); the paper has no value for it.")
+_TIMES = ("The relative cost of two implementations (our CPU code builds the DRT weights once; the paper's GPU code "
+          "traces rays in every iteration), normalised by our 4-camera SMART: not a property of the images.")
+#: each row's kind (REPLICATION.md, point 7); rows not listed are physics. Order matters for the
+#: patterns (the first that matches wins; an exact id wins over all)
+KINDS = {
+    # ---------------------------------------------------------------- physics, with caveats
+    "ltpr_cross_nc*": Kind(
+        "physics", "The value can only be one of this N_c's two Table 1 LTPRs (or null), so what is tested is an "
+        "ordering, LF low (PMR 14) > Tomo-PIV (N_c, 0.05 ppp) >= LF high, in mm: it could fail, but the three rows "
+        "share the same two light-field errors, and in mm the high camera's voxels are half the low's."),
+    "lf_rms_falls_with_ltpr_pmr14": Kind(
+        "physics", "Only PMR 14 is compared, in mm, where the high camera's voxels are half the low's: the ordering "
+        "holds unless its error in voxels is twice the low's. The paper states the fall for every PMR (point 10)."),
+    "lf_xy_pos_error_high_over_low_pmr*": Kind(
+        "physics", "The high camera's voxels are half the low's (Table 2), so a centroid error that is a fixed "
+        "fraction of a voxel gives 0.5 by itself."),
+    "tomo_rms_falls_with_nc": Kind(
+        "physics", "Compared at 0.05 ppp only; Fig. 8b shows both seedings (0.1 ppp: the tomo_rms_px_*_ppp0.1 "
+        "rows)."),
+    "w_rms_px_pmr14_high": Kind("physics", "The paper's 'pixels' read as voxels of the light-field reconstruction "
+                                "(w: 0.075 mm)."),
+    "time_ratio_lf_*": Kind("physics", _TIMES),
+    "time_lf_pmr14_fastest_low": Kind("physics", _TIMES),
+    "experiment_time_ratio_lf_over_tomo": Kind(
+        "physics", "Our CPU DRT-MART on a crop scaled by the pixel count over our CPU SMART, against the paper's GPU: "
+        "the implementations' relative cost, not the images'."),
+    "experiment_lf_tomo_correlation": Kind(
+        "physics", "The paper's 0.94 is of phase-averaged fields (20 pairs of its forced jet); ours is one "
+        "instantaneous pair of a synthetic turbulent jet on the light-field crop, the mean vector removed."),
+    # ---------------------------------------------------------------- definitions: arithmetic on the paper's tables
+    "ltpr_*": Kind("definition", "LTPR = light-field pixels / (N_c x 160 x 160 px): the paper's own arithmetic on "
+                   "Table 1's camera sizes; no simulation enters."),
+    "particles_lf_*": Kind("definition", "0.5 particles per microlens x Table 1's MLA resolution: the paper's own "
+                           "arithmetic (PMR 28, low LTPR: the paper prints 470 for 0.5 x 29 x 33 = 478)."),
+    "particles_tomo_*": Kind("definition", "ppp x 160 x 160 px: the paper's own arithmetic on Table 1."),
+    "time_ratio_tomo_nc4_ppp0.05": Kind("definition", "The normalisation: our 4-camera, 0.05 ppp time over itself, 1 "
+                                        "by definition (as the paper's)."),
+    "experiment_ltpr": Kind("definition", "6600 x 4400 px over the four rendered 480 x 320 px cameras: Table 4's "
+                            "own arithmetic on its camera sizes, which the replica's cameras are set to."),
+    "experiment_tomo_vectors": Kind(
+        "definition", "The vector count of Table 4's 480 x 320 x 130-voxel grid with its 32-voxel final window at 75 % "
+        "overlap, the grid and windows the replica's tomographic arm is set to: it holds for any images."),
+    "experiment_lf_vectors_full": Kind(
+        "definition", "The vector count of Table 4's whole 3300 x 2200 x 182-voxel grid with 160 x 160 x 32 windows at "
+        "75 % overlap, from the paper's numbers alone (our run is a crop).", ("table4_lf_grid",)),
+    # ---------------------------------------------------------------- info: could not have failed
+    "time_ratio_tomo_*": Kind(
+        "info", "Could not have failed: SMART's cost grows with cameras x voxels x iterations, so any implementation "
+        "gives about N_c / 4 (1 to 2), inside the factor-3 band around the paper's 1.01-1.37."),
+    "lf_image_rel_l2_vs_5M_rays": Kind(
+        "info", "A check of our stratified rays against our own Monte Carlo image with the paper's 5 million rays; "
+        "the paper reports no number (0 stands for 'the same image'): it verifies the renderer, not a result."),
+    # ---------------------------------------------------------------- info: not compared
+    "[uvw]_rms_px_pmr*": _INFO_FIG8,
+    "tomo_rms_px_*": _INFO_FIG8,
+    "lf_gross_errors_*": _DIAGNOSIS,
+    "lf_hot_voxels_*": _DIAGNOSIS,
+    "lf_rms_vox_*": _DIAGNOSIS,
+    "experiment_*_ideal_rms_vox": _DIAGNOSIS,
+    "experiment_ideal_*": _DIAGNOSIS,
+    "experiment_*_subwindow_motion_vox": _DIAGNOSIS,
+    "experiment_*_rms_vox": Kind("info", "The error against the simulated truth: an experiment has none, so the "
+                                 "paper has no value."),
+    "experiment_*_particles_per_final_window": Kind(
+        "info", "Concentration x final-window volume, arithmetic on the replica's Table 4 set-up; the paper's 7 ~ 10 "
+        "is its sizing rule for the simulations, not a measurement of the experiment."),
+    "experiment_mean4_*": Kind(
+        "info", "The replica re-run with the jet's mean flow only and two more passes, a diagnosis of the light-field "
+        "arm; the paper's value is of its measured jet with two passes, so not compared."),
+}
+
+
 STUDY = Study(
     name="lfpiv-vs-tomo",
     paper="001_9c7427d46b54a57a.txt",
@@ -1255,4 +1342,6 @@ STUDY = Study(
                   "lf_hot_voxels_on_boundary_pmr14_low", "lf_rms_vox_boundary_zeroed_pmr14_low",
                   "lf_rms_vox_edge_dropped_pmr14_low"),
     describe="LF-PIV (800/1600 px, PMR 7/14/28, DRT-MART) vs 4/6/8-camera Tomo-PIV (MLOS-SMART) on a round jet",
+    kinds=KINDS,
+    inputs_from_paper=INPUTS_FROM_PAPER,
 )

@@ -14,7 +14,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from mitpiv.studies.replication import Curve, ReplicationResult, Study, compare_trend, compare_value
+from mitpiv.studies.replication import Curve, Kind, ReplicationResult, Study, compare_trend, compare_value
 
 D_LEVELS = (0.0, 0.1, 0.5, 1.0, 2.0)
 SA_LEVELS = (0.0, 0.02, 0.05, 0.1)
@@ -596,6 +596,91 @@ def run(ctx) -> ReplicationResult:
     return ReplicationResult(rows=rows, curves=curves, sections=sections, figures=figures)
 
 
+#: results of the paper used as model inputs (REPLICATION.md, point 8): only the paper-PSF arm
+#: (``psf="paper"``, :func:`paper_kernel`) images with them; every other point uses our Fourier PSF
+INPUTS_FROM_PAPER = {
+    "PAPER_TABLE_3_2": "Table 3.2: the paper's computed aberration-free PSF on the 10 um pixels (the shape within "
+                       "each ring of the paper-PSF arm)",
+    "PAPER_TABLE_3_3": "Table 3.3: the paper's computed PSF energies per SA (centre, first and second ring), which "
+                       "the psf_* rows predict; the paper-PSF arm images the particles with them",
+}
+
+_SA_FIT_FAILS = ("at 0.5/mm^3 the per-plane noise fit fails under SA 0.1 (nSNR 2.58: in the nearly empty planes the "
+                 "noise part of the histogram is a spike, not a normal distribution)")
+_VACUOUS_Q = ("Could not have failed: the undistorted baseline Q_D0 is already 0.644 at 4/mm^3 (0.569-0.644 over the "
+              "densities), below the 0.75 line, so 'Q < 0.75 at every density' holds whatever distortion does. A "
+              "comparison that tests the distortion (its loss against D0) comes with the second pass (issue 47).")
+_WHAT_NEXT = "What next, not in the paper: compares nothing."
+
+#: each row's kind (REPLICATION.md, point 7); rows not listed are physics. Every row is read at
+#: 4 particles/mm^3 from one particle field: the caveats give the rest of the committed sweep (point 10)
+KINDS = {
+    # -------------------------------------------------------------- not compared
+    "Q_density_trend_fixed_threshold": Kind("info", why="A diagnosis of the Q_density_trend disagreement (one "
+                                            "fixed intensity threshold for every plane and density); the paper has "
+                                            "no value for it."),
+    "Q_D*_brown": Kind("info", why=_WHAT_NEXT + " Q with a Brown-Conrady calibration that models the distortion."),
+    "time_brown_over_pinhole": Kind("info", why=_WHAT_NEXT + " The cost of the Brown-Conrady calibration."),
+    # -------------------------------------------------------------- could not have failed
+    "Q_D1": Kind("info", why=_VACUOUS_Q),
+    "Q_D2": Kind("info", why=_VACUOUS_Q),
+    # -------------------------------------------------------------- arithmetic on the paper's equations
+    "shift_D2_rn1": Kind("definition", why="True by definition: appendix A sets K1 (eq. A.8) so that the corner pixel "
+                         "(r_n = 1) moves by p % of r_max, 0.02 x 707.1 = 14.14 px; no simulation is involved."),
+    "shift_D2_rn0.5": Kind("definition", why="Arithmetic on the paper's eqs. A.3 and A.8 (a shift of p/100 r_n^3 "
+                           "r_max), no simulation: it checks Table 3.1 against the paper's own equations and finds its "
+                           "inner columns follow r_n^2, a finding about the table, not a prediction."),
+    # -------------------------------------------------------------- the paper's own PSF
+    "Q_SA0.1_paperpsf": Kind("input", why="The SA sweep imaged with the paper's own PSF (Tables 3.2, 3.3), a result "
+                             "of the paper that the psf_* rows predict (and miss): a diagnosis of the Q_SA "
+                             "disagreement, not an independent prediction.",
+                             reads=("PAPER_TABLE_3_2", "PAPER_TABLE_3_3")),
+    # -------------------------------------------------------------- physics rows: caveats
+    "Q_D0": Kind("physics", why="Read at 4/mm^3; below 0.75 at every density (0.569 at 0.5 to 0.644 at 4/mm^3). The "
+                 "level is set by the true volume V_S (0.7-voxel blobs), which the paper does not define."),
+    "Q_density_trend": Kind("physics", why="Over the whole sweep: ours rises at every step from 0.5 to 4/mm^3."),
+    "Q_D0.1": Kind("physics", why="Read at 4/mm^3 from one particle field (the same particles as Q_D0); the margin is "
+                   "0.0016 in Q. The ordering holds at every density of the sweep."),
+    "Q_D0.5": Kind("physics", why="Read at 4/mm^3; the ordering holds at every density of the sweep."),
+    "Q_SA*": Kind("physics", why="Read at 4/mm^3, where the paper states its bound ('no more than 0.04 at the highest "
+                  "density'). Over the sweep the loss is positive at 1/mm^3 (0.001-0.011) and negative from 2/mm^3 on; "
+                  + _SA_FIT_FAILS + " (under SA 0.05 nSNR is 1.26 there): the sign is not settled by one "
+                  "realisation (points 9-10; second pass, issue 47)."),
+    "Q_D1_SA0.1": Kind("physics", why="The 0.02 band is five times the SA effect at 4/mm^3 (Q_SA0.1 - Q_D0 = "
+                       "+0.004), so additivity is barely tested there; " + _SA_FIT_FAILS + ", and there the "
+                       "committed curves depart from additivity by 0.079 (point 10)."),
+    "Qprime_D0": Kind("physics", why="Read at 4/mm^3; over the sweep Q' is above 0.97 at 0.5 and 1/mm^3 (0.985, "
+                      "0.980) and below it from 2/mm^3 on. The level is the tie floor of the true volume, which the "
+                      "paper does not define."),
+    "Qprime_D2": Kind("physics", why="Read at 4/mm^3; the drop from D0 is at most 1e-4 at every density and changes "
+                      "sign (Q'_D2 > Q'_D0 at 0.5 and 3/mm^3)."),
+    "Qprime_SA0.1": Kind("physics", why="Read at 4/mm^3; " + _SA_FIT_FAILS + ", and there Q' falls by 0.023, ten "
+                         "times the band (within it at 1-4/mm^3): the whole sweep would disagree (point 10)."),
+    "nSNR_D0.1": Kind("physics", why="Read at 4/mm^3, 0.003 below 1 from one particle field; at 0.5 and 1/mm^3 ours "
+                      "is above 1 (1.003, 1.004), so 'degradation already at 0.1 %' fails over the whole sweep "
+                      "(point 10)."),
+    "nSNR_D2": Kind("physics", why="Read at 4/mm^3; below 1 at every density of the sweep (0.92-0.95)."),
+    "nSNR_SA0.1": Kind("physics", why="Read at 4/mm^3; " + _SA_FIT_FAILS + ", so the whole sweep is not compared "
+                       "(point 10; second pass, issue 47)."),
+    "nSNR_SA0.02": Kind("physics", why="Read at 4/mm^3, 0.002 below 1 from one particle field; below 1 at every "
+                        "density of the sweep (0.997-0.998)."),
+    "sigma_D2_over_D0": Kind("physics", why="Read at 4/mm^3; above 1 at every density but 1/mm^3 (0.999), so the "
+                             "disagreement holds over the sweep up to one marginal point."),
+    "sigma_SA0.1_over_SA0": Kind("physics", why="Read at 4/mm^3; " + _SA_FIT_FAILS + ", and there the ratio is "
+                                 "2.10, so 'sigma decreases' fails over the whole sweep (point 10)."),
+    "sigma_all_D2_over_D0": Kind("physics", why="Above 1 at every density where it exists (1.004-1.006); null at "
+                                 "0.5/mm^3 because those points were read from a cache written before sigma_all was "
+                                 "recorded (point 12)."),
+    "mu_D2_over_D0": Kind("physics", why="The ±5 % band is wide against the whole effect (+1.5 % to +2.7 % over the "
+                          "densities: distortion only moves light, and barrel distortion compresses the image by a "
+                          "few percent), so it tests little; within the band at every density."),
+    "sigma_rises_with_density": Kind("physics", why="Over the whole sweep (five densities); expected of any image "
+                                     "model of random particles (the out-of-focus background's spread grows with the "
+                                     "number of overlapping particles), so it checks the model more than the paper."),
+    "psf_*": Kind("physics", why="The wavelength (532 nm) is ours, the paper gives none; the aperture is Fig. 3-3's "
+                  "f/2.8, at the working f-number f/2.8 (1 + M)."),
+}
+
 STUDY = Study(
     name="sapiv-distortion",
     paper="002_04a1983519731e8a.txt",
@@ -604,4 +689,6 @@ STUDY = Study(
     required_ids=("Q_D0", "Q_D0.1", "Q_D0.5", "Q_D1", "Q_D2", "Q_SA0.02", "Q_SA0.05", "Q_SA0.1", "Q_D1_SA0.1",
                   "Qprime_D0", "Qprime_D2", "nSNR_D0.1", "nSNR_D2", "nSNR_SA0.1", "sigma_D2_over_D0"),
     describe="Q, Q', histogram mu/sigma and nSNR of a 5 x 5 SAPIV array vs distortion 0-2 % and SA 0-0.1 waves",
+    kinds=KINDS,
+    inputs_from_paper=INPUTS_FROM_PAPER,
 )
