@@ -90,9 +90,10 @@ def _examples_page() -> str:
     return "\n".join(parts)
 
 
-def _include(path: Path, *, heading_shift: bool = False) -> list[str]:
+def _include(path: Path, *, heading_shift: bool = False, start_line: int = 0) -> list[str]:
     rel = os.path.relpath(path, DOCS / "_generated")
-    opts = [":relative-docs: ..", ":relative-images:"] + ([":heading-offset: 1"] if heading_shift else [])
+    opts = [":relative-docs: ..", ":relative-images:"] + ([":heading-offset: 1"] if heading_shift else []) \
+        + ([f":start-line: {start_line}"] if start_line else [])
     return ["```{include} " + rel, *opts, "```", ""]
 
 
@@ -105,7 +106,14 @@ def _replications_page() -> str:
     if not reports:
         parts += ["No replication report has been committed yet.", ""]
     for r in reports:
-        parts += _include(r, heading_shift=True)
+        lines = r.read_text(encoding="utf-8").splitlines()
+        if len(lines) > 2 and lines[2].startswith("# "):
+            # the report opens with its physics-row tally, then its title: here the title comes
+            # first (one level down), then the tally, then the rest of the report
+            parts += ["#" + lines[2], "", lines[0], ""]
+            parts += _include(r, heading_shift=True, start_line=3)
+        else:
+            parts += _include(r, heading_shift=True)
     return "\n".join(parts)
 
 
@@ -117,7 +125,14 @@ def _studies_page() -> str:
     if not reports:
         parts += ["No study report has been committed yet.", ""]
     for r in reports:
-        parts += _include(r, heading_shift=True)
+        lines = r.read_text(encoding="utf-8").splitlines()
+        if len(lines) > 2 and lines[2].startswith("# "):
+            # the report opens with its physics-row tally, then its title: here the title comes
+            # first (one level down), then the tally, then the rest of the report
+            parts += ["#" + lines[2], "", lines[0], ""]
+            parts += _include(r, heading_shift=True, start_line=3)
+        else:
+            parts += _include(r, heading_shift=True)
     return "\n".join(parts)
 
 
