@@ -129,7 +129,7 @@ def drop_study_stack(tmp):
     stack's cost does not depend on the content."""
     from mitpiv.analysis.drop_fragments import PAPER_ALPHA_RANGES
     from mitpiv.physics.plenoptic import paper_003_camera
-    from mitpiv.studies.replications.drop_fragments import SUPERSAMPLE, _stack_depths
+    from mitpiv.replications.drop_fragments.study import SUPERSAMPLE, _stack_depths
 
     print(f"== drop-fragments study: 1000-plane stack of the paper's 6600x4400 raw, {SUPERSAMPLE}x supersampled")
     cam = paper_003_camera("drop_impact")

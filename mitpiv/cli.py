@@ -553,7 +553,7 @@ def cmd_sweep(args) -> int:
     ok = int((df["status"] == "ok").sum())
     print(f"{ok}/{len(df)} points ok -> {args.out}/results.csv, results.parquet")
     if args.tracking_results:
-        from mitpiv.studies.tracking_study import write_tracking_study
+        from mitpiv.replications.tracking_density.study import write_tracking_study
 
         doc = write_tracking_study(args.out, args.tracking_results)
         for r in doc["rows"]:
@@ -628,7 +628,7 @@ def cmd_bench(args) -> int:
 
 
 def cmd_replicate(args) -> int:
-    from mitpiv.studies.replication import Row, get_study, list_studies, reclassify, replicate, tally_line
+    from mitpiv.replications.frame import Row, get_study, list_studies, reclassify, replicate, tally_line
 
     if args.list or args.study is None:
         names = list_studies()

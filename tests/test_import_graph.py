@@ -95,8 +95,12 @@ def test_layers():
     # tracking is a peer of reconstruct: physics, io, grid, analysis below it
     assert not edges.get("tracking", set()) & {"reconstruct", "lightfield", "holography", "imaging"}
     for pkg, dst in edges.items():
-        if pkg not in TOP | {"studies"}:
+        if pkg not in TOP | {"studies", "replications"}:
             assert "studies" not in dst, pkg
+    # the replications sit above the experiment engine: only the facade and the CLI import them
+    for pkg, dst in edges.items():
+        if pkg not in TOP | {"replications"}:
+            assert "replications" not in dst, pkg
 
 
 def test_the_checker_finds_a_cycle():

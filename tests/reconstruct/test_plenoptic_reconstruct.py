@@ -146,7 +146,7 @@ def test_drt_mart_drops_the_voxels_at_the_edge_of_the_field():
     dropped at 0.75. A grid well inside the field keeps its voxels (a few in 10^4 fall below
     0.75 by the rays' sampling noise). Bad values are refused by name."""
     from mitpiv.reconstruct.plenoptic import coverage
-    from mitpiv.studies import lfpiv_tomo_sim as S
+    from mitpiv.replications.lfpiv_vs_tomo import model as S
 
     case = S.LFCase("low", 14, 2.4, 3.0)
     cam, grid = S.lf_camera(case), case.grid()

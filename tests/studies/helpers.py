@@ -193,21 +193,3 @@ def stage_files(run: Path, stage: str) -> dict:
     rec = json.loads((Path(run) / stage / "stage.json").read_text())
     return {k: v["sha256"] for k, v in rec["outputs"].items()}
 
-
-def assert_second_edition(res: dict, out: Path) -> None:
-    """A replication's results carry the second edition's fields (REPLICATION.md, points 7-12):
-    every row a kind, a verdict and its realisations; the points with their code version; and
-    the report opens with the physics rows' tally, which counts nothing else."""
-    from mitpiv.studies.replication import ARMS, KINDS, VERDICTS
-
-    rows = res["rows"]
-    assert rows and all(r["kind"] in KINDS and r["verdict"] in VERDICTS and r["arm"] in ARMS for r in rows)
-    assert all(r["n"] >= 1 and (r["ci"] is None or r["ci"][0] <= r["ci"][1]) for r in rows)
-    phys = [r for r in rows if r["kind"] == "physics"]
-    assert not [r["id"] for r in phys if r["verdict"] == "not compared" or r["reads"]]
-    assert len(res["code_hash"]) == 16 and res["points_computed"] + res["points_cached"] > 0
-    t = res["tally"]["paper-model"]
-    assert t["n"] == len(phys) and t["agree"] == sum(r["verdict"] == "agrees" for r in phys)
-    first = (out / "report.md").read_text().splitlines()[0]
-    assert first.startswith(f"**{t['agree']} of {t['n']} physics rows agree, {t['disagree']} disagree, "
-                            f"{t['inconclusive']} inconclusive (arm paper-model)")

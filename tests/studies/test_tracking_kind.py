@@ -233,9 +233,9 @@ def test_openlpt_and_tomo_on_the_same_images_and_the_study_table(tiny, tmp_path)
     import json
     import shutil
 
+    from mitpiv.replications.tracking_density.study import METRICS, write_tracking_study
     from mitpiv.studies.runner import run_config
     from mitpiv.studies.sweep import _write_table
-    from mitpiv.studies.tracking_study import METRICS, write_tracking_study
 
     res, out = tiny
     run = tmp_path / "run"
@@ -279,8 +279,8 @@ def test_openlpt_and_tomo_on_the_same_images_and_the_study_table(tiny, tmp_path)
 def test_an_openlpt_failure_is_a_row_with_its_reason(tiny, tmp_path):
     import shutil
 
+    from mitpiv.replications.tracking_density.study import study_rows
     from mitpiv.studies.runner import run_config
-    from mitpiv.studies.tracking_study import study_rows
 
     res, out = tiny
     run = tmp_path / "run"

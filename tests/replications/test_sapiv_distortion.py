@@ -12,9 +12,9 @@ from mitpiv.physics.camera import PinholeCamera
 from mitpiv.physics.distortion import Distortion, percent_shift, percent_to_k1
 from mitpiv.reconstruct.mapping import PinholeMapping
 from mitpiv.reconstruct.sapiv import noise_normal_fit, plane_homography, refocus_planes
-from mitpiv.studies.replication import RESULTS_KEYS, replicate
-from mitpiv.studies.replications.sapiv_distortion import PAPER_TABLE_3_1, STUDY
-from mitpiv.studies.sapiv_sim import SapivSystem, locate_dots, render_dot_windows
+from mitpiv.replications.frame import RESULTS_KEYS, replicate
+from mitpiv.replications.sapiv_distortion.model import SapivSystem, locate_dots, render_dot_windows
+from mitpiv.replications.sapiv_distortion.study import PAPER_TABLE_3_1, STUDY
 
 from .helpers import assert_second_edition
 
@@ -179,7 +179,7 @@ def test_distortion_free_system_has_zero_k1():
 def test_threshold_diagnosis_keeps_the_papers_metrics_and_scores_other_thresholds():
     """The diagnosis re-thresholds the raw planes: k = 3 reproduces the study's Q; k = 0 is
     the raw volume; a fixed threshold below every voxel equals no threshold."""
-    from mitpiv.studies.sapiv_sim import evaluate_point
+    from mitpiv.replications.sapiv_distortion.model import evaluate_point
 
     s = SapivSystem()
     cams = s.cameras(0.0)
@@ -200,7 +200,7 @@ def test_threshold_diagnosis_keeps_the_papers_metrics_and_scores_other_threshold
 
 def test_the_papers_psf_kernel_follows_tables_3_2_and_3_3():
     from mitpiv.imaging import PointPSFTable, splat_points
-    from mitpiv.studies.replications.sapiv_distortion import PAPER_TABLE_3_2, PAPER_TABLE_3_3, paper_kernel
+    from mitpiv.replications.sapiv_distortion.study import PAPER_TABLE_3_2, PAPER_TABLE_3_3, paper_kernel
 
     ring = np.maximum.outer(np.abs(np.arange(5) - 2), np.abs(np.arange(5) - 2))
     t32 = np.array(PAPER_TABLE_3_2)
@@ -236,8 +236,8 @@ def test_committed_rows_take_the_declared_kinds():
     import json
     from pathlib import Path
 
-    from mitpiv.studies.replication import Row, classify_rows, unused_kinds
-    from mitpiv.studies.replications.sapiv_distortion import INPUTS_FROM_PAPER, KINDS
+    from mitpiv.replications.frame import Row, classify_rows, unused_kinds
+    from mitpiv.replications.sapiv_distortion.study import INPUTS_FROM_PAPER, KINDS
 
     committed = Path(__file__).resolve().parents[2] / "docs" / "replications" / "sapiv-distortion" / "results.json"
     fields = {f.name for f in dataclasses.fields(Row)}

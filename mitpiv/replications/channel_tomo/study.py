@@ -3,7 +3,7 @@ channel at Re_tau = 934 with cameras on a sphere, Mie scattering, camera noise a
 polynomial calibration): ``mitpiv replicate channel-tomo [--quick]``.
 
 Orchestration only: the experiment (cameras, targets and calibration, images, noise,
-reconstruction, PIV and statistics) is :mod:`mitpiv.studies.channel_tomo_sim`; the flow
+reconstruction, PIV and statistics) is :mod:`mitpiv.replications.channel_tomo.model`; the flow
 :class:`mitpiv.physics.flows.Channel` (del Alamo et al. 2004 profiles, synthetic
 turbulence); the measures :func:`mitpiv.analysis.quality.quality_q` (the paper's eq. 5),
 :func:`mitpiv.analysis.piv3d.normalised_cross_correlation` (eq. 3),
@@ -54,7 +54,7 @@ import math
 
 import numpy as np
 
-from mitpiv.studies.replication import Curve, Kind, ReplicationResult, Study, compare_trend, compare_value
+from mitpiv.replications.frame import Curve, Kind, ReplicationResult, Study, compare_trend, compare_value
 
 #: Table 1 of the paper: statistic -> reference -> errors [%] at l_v+ = 0.94, 0.63, 0.47.
 #: Paper names: u streamwise, v spanwise, w wall-normal.
@@ -110,7 +110,7 @@ def _points(sc: dict) -> dict:
     cal, q_pts, piv_pts = set(), [], []
 
     def add(config, theta, phi, lv, crop, ni, seed, mie, windows):
-        from mitpiv.studies.channel_tomo_sim import camera_poses
+        from mitpiv.replications.channel_tomo.model import camera_poses
 
         poses = camera_poses(config, theta, phi)
         for a, e in poses:
@@ -149,7 +149,7 @@ def _points(sc: dict) -> dict:
 
 def cost_estimate(quick: bool) -> dict:
     """Points and estimated single-core seconds of a scale (the measured rates above)."""
-    from mitpiv.studies.channel_tomo_sim import ChannelTomoSystem
+    from mitpiv.replications.channel_tomo.model import ChannelTomoSystem
 
     s = ChannelTomoSystem()
     pts = _points(scale(quick))
@@ -188,7 +188,7 @@ def _cal_key(pose) -> str:
 
 def calibration_point(pose) -> dict:
     """One camera pose's rendered target and polynomial fit (a Dask task)."""
-    from mitpiv.studies.channel_tomo_sim import ChannelTomoSystem, calibrate_pose
+    from mitpiv.replications.channel_tomo.model import ChannelTomoSystem, calibrate_pose
 
     a, e, lv, crop = pose
     return calibrate_pose(ChannelTomoSystem(), a, e, lv, crop, seed=int(abs(a) * 1000 + abs(e)))
@@ -196,7 +196,7 @@ def calibration_point(pose) -> dict:
 
 def evaluation_point(item: dict) -> dict:
     """One configuration's frames, reconstruction, Q and (with windows) PIV statistics."""
-    from mitpiv.studies.channel_tomo_sim import ChannelTomoSystem, evaluate_point
+    from mitpiv.replications.channel_tomo.model import ChannelTomoSystem, evaluate_point
 
     return evaluate_point(ChannelTomoSystem(), configuration=item["config"], theta_deg=item["theta"],
                           phi_deg=item["phi"], voxel_plus=item["lv"], crop_plus=item["crop"], n_i=item["ni"],
@@ -220,7 +220,7 @@ def run(ctx) -> ReplicationResult:
                       "calibrations": [cal[(a, e, it["lv"], it["crop"])] for a, e in it["poses"]]})
     # the image smoothing is part of a point's identity: points computed without it (before the
     # zero-pixel finding) are not reused
-    from mitpiv.studies.channel_tomo_sim import ChannelTomoSystem
+    from mitpiv.replications.channel_tomo.model import ChannelTomoSystem
 
     sm = f"_sm{_f(ChannelTomoSystem().image_smoothing_px)}"
     res = ctx.map(evaluation_point, items, key=lambda it: _key(it) + f"_b{it['base_seed']}{sm}", desc="points")
@@ -252,7 +252,7 @@ def pooled_statistics(results: list[dict], window: int) -> dict:
     the synthetic turbulence) pooled per vector layer, for the measurement and both truths,
     and the Table 1 errors (:func:`mitpiv.analysis.channel.statistics_error_percent`)."""
     from mitpiv.analysis.channel import statistics_error_percent, wall_statistics
-    from mitpiv.studies.channel_tomo_sim import ChannelTomoSystem
+    from mitpiv.replications.channel_tomo.model import ChannelTomoSystem
 
     system = ChannelTomoSystem()
     ch = system.channel(0)  # the frame and the wall units (the same for every realisation)
@@ -621,7 +621,7 @@ def _camera_part(ctx, sc, get, rows, curves, figures, sections, system):
 
 
 def _table2_part(ctx, sc, rows, curves, sections, system):
-    from mitpiv.studies.channel_tomo_sim import PAPER_TABLE_2, image_statistics
+    from mitpiv.replications.channel_tomo.model import PAPER_TABLE_2, image_statistics
 
     stats = {}
     for mie in ("paper", "physical"):

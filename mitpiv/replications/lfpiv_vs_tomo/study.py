@@ -2,9 +2,9 @@
 (seed paper 001, section 2 and Tables 1-3): ``mitpiv replicate lfpiv-vs-tomo [--quick]``.
 
 Orchestration only: the cameras, images, reconstructions and metrics are
-:mod:`mitpiv.studies.lfpiv_tomo_sim` (its docstring lists every reading of what the paper
+:mod:`mitpiv.replications.lfpiv_vs_tomo.model` (its docstring lists every reading of what the paper
 leaves open), the flow :class:`mitpiv.physics.jet.NearFieldJet`, the paper's axis
-:func:`mitpiv.studies.lfpiv_tomo_sim.ltpr`. Each case (a light-field camera at one PMR, or
+:func:`mitpiv.replications.lfpiv_vs_tomo.model.ltpr`. Each case (a light-field camera at one PMR, or
 a tomographic rig at one seeding) is one resumable point (``ctx.map``): two frames rendered,
 reconstructed and scored.
 
@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from mitpiv.errors import ConfigError
-from mitpiv.studies.lfpiv_tomo_sim import MIN_COVERAGE as S_MIN_COVERAGE
-from mitpiv.studies.replication import Curve, Kind, ReplicationResult, Row, Study, compare_trend, compare_value
+from mitpiv.replications.frame import Curve, Kind, ReplicationResult, Row, Study, compare_trend, compare_value
+from mitpiv.replications.lfpiv_vs_tomo.model import MIN_COVERAGE as S_MIN_COVERAGE
 
 log = logging.getLogger(__name__)
 
@@ -102,7 +102,7 @@ def _key(it: dict) -> str:
 
 def case_point(it: dict) -> dict:
     """One case (a Dask task): two frames rendered, reconstructed, scored."""
-    from mitpiv.studies import lfpiv_tomo_sim as S
+    from mitpiv.replications.lfpiv_vs_tomo import model as S
 
     if it["kind"] == "lf":
         return S.lf_point(S.LFCase(it["camera"], it["pmr"], it["crop_mm"], it["crop_y_mm"]), iterations=it["iterations"],
@@ -129,7 +129,7 @@ DRT_ACTIVE_PER_PIXEL_SLAB = 3.9
 def cost_estimate(quick: bool) -> dict:
     """Estimated single-core seconds of a scale from the measured rates (light-field cases,
     tomographic cases; each with its PIV on the reconstructions and on the ideal volumes)."""
-    from mitpiv.studies import lfpiv_tomo_sim as S
+    from mitpiv.replications.lfpiv_vs_tomo import model as S
 
     sc = scale(quick)
     lf_s, tomo_s = 0.0, 0.0
@@ -204,7 +204,7 @@ def convergence(sc: dict, seed: int) -> dict:
     """Relative L2 difference between the stratified images of one particle (PMR 14, low LTPR
     camera, 2 mm behind the focal plane) at increasing ray densities and a Monte Carlo image of
     ``convergence_random_rays`` random rays (the paper's model; 5 million in the full run)."""
-    from mitpiv.studies import lfpiv_tomo_sim as S
+    from mitpiv.replications.lfpiv_vs_tomo import model as S
 
     cam = S.lf_camera(S.LFCase("low", 14, 2.4))
     p = np.array([[0.05, -0.03, 2.0]])
@@ -757,7 +757,7 @@ def run(ctx) -> ReplicationResult:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from mitpiv.studies import lfpiv_tomo_sim as S
+    from mitpiv.replications.lfpiv_vs_tomo import model as S
 
     sc = scale(ctx.quick)
     items = _items(sc, ctx.seed)
@@ -1107,7 +1107,7 @@ LF_RES = {"low": "800 x 800", "high": "1600 x 1600"}
 
 
 def _mla():
-    from mitpiv.studies.lfpiv_tomo_sim import LF_CAMERAS
+    from mitpiv.replications.lfpiv_vs_tomo.model import LF_CAMERAS
 
     return {k: v["mla"] for k, v in LF_CAMERAS.items()}
 
@@ -1160,7 +1160,7 @@ def _disagreements(ctx, R, depth, E) -> str:
                     f"{_v3(depth['by_iterations'][i]['trimmed']['rms_vox_all'])} -> "
                     f"{_v3(depth['by_iterations'][i]['masked']['rms_vox_all'])}" for i in its)
         + f" voxels (ideal volumes {_v3(depth['ideal']['rms_vox_all'])}). Every light-field case of this run drops "
-        "the field's edge (`lfpiv_tomo_sim.MIN_COVERAGE`; particles there are then not reconstructed, which the "
+        "the field's edge (`mitpiv.replications.lfpiv_vs_tomo.model.MIN_COVERAGE`; particles there are then not reconstructed, which the "
         "detection rates show). The crops make the artefact dominant (every window touches the edge); the paper's "
         "whole sensor has it only at its borders, and its own DRT-MART may treat them otherwise.\n"
         f"- **Iterations.** On the same images and weights (left alone), gross errors (> {last['gross_voxels']:g} "
@@ -1213,7 +1213,7 @@ def _method(sc, R, conv, est_full, est_quick, ctx) -> str:
           for k, r in R.items() if k[0] == "lf"]
     return (
         "## Method and decisions\n\n"
-        "Set-up and readings of what the paper leaves open: see `mitpiv.studies.lfpiv_tomo_sim` (module docstring): "
+        "Set-up and readings of what the paper leaves open: see `mitpiv.replications.lfpiv_vs_tomo.model` (module docstring): "
         "12 x 12 x 10 mm volume; light-field cameras at magnification 1 (Table 1's p_p is both the pixel and the "
         "object-space pixel), 200 mm main lens at 1:1, image-side f/4 matched by f/4 hexagonal lenslets of pitch "
         "PMR x p_p with the table's MLA resolutions; tomographic pinholes 946.5 mm away (image distance 93.4 mm, "

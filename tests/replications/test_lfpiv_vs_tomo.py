@@ -9,9 +9,9 @@ import pytest
 
 from mitpiv.errors import ConfigError
 from mitpiv.physics.jet import BROWN_ROSHKO_SPREADING, MIXING_LAYER_RMS, NearFieldJet
-from mitpiv.studies import lfpiv_tomo_sim as S
-from mitpiv.studies.replication import RESULTS_KEYS, replicate
-from mitpiv.studies.replications.lfpiv_vs_tomo import STUDY, cost_estimate
+from mitpiv.replications.frame import RESULTS_KEYS, replicate
+from mitpiv.replications.lfpiv_vs_tomo import model as S
+from mitpiv.replications.lfpiv_vs_tomo.study import STUDY, cost_estimate
 
 from .helpers import assert_second_edition
 
@@ -75,7 +75,7 @@ def test_ideal_piv_recovers_a_uniform_translation_and_counts_the_window():
     velocity_error; the runner's PIV settings pass through."""
     from mitpiv.grid import VoxelGrid
     from mitpiv.physics.flows import flow_from_dict
-    from mitpiv.studies.replications.lfpiv_vs_tomo import _ideal_piv
+    from mitpiv.replications.lfpiv_vs_tomo.study import _ideal_piv
 
     grid = VoxelGrid.from_bounds([0.0, 0.0, 0.0], [1.6, 1.6, 1.6], 0.025)  # 64^3
     rng = np.random.default_rng(3)
@@ -96,7 +96,7 @@ def test_subwindow_motion_of_a_linear_flow_is_all_followed_by_a_deforming_window
     u = -omega y over a window of width W is omega W / sqrt(12) (a uniform distribution) times
     dt over the voxel; a sinusoidal (ABC) flow leaves a non-linear part."""
     from mitpiv.physics.flows import flow_from_dict
-    from mitpiv.studies.replications.lfpiv_vs_tomo import subwindow_motion
+    from mitpiv.replications.lfpiv_vs_tomo.study import subwindow_motion
 
     rot = flow_from_dict({"kind": "solid_body", "omega_rad_s": 2.0, "center": [0, 0, 0], "axis": [0, 0, 1]})
     c = np.random.default_rng(0).random((50, 3)) * 4.0
@@ -114,7 +114,7 @@ def test_field_correlation_is_the_vector_correlation_on_common_points():
     """The LF-vs-Tomo comparison: the second field interpolated (trilinear: exact for linear
     fields) at the first's valid vectors inside its grid; r = 1 for the same flow sampled on
     two grids, -1 for the reversed fluctuation, and blind to a shared mean vector."""
-    from mitpiv.studies.replications.lfpiv_vs_tomo import _common_points_correlation
+    from mitpiv.replications.lfpiv_vs_tomo.study import _common_points_correlation
 
     def field(x, y, z, f, valid=None):
         zz, yy, xx = np.meshgrid(z, y, x, indexing="ij")
@@ -191,7 +191,7 @@ def test_light_field_point_images_on_the_lenslet_below():
 
 
 def test_light_field_image_converges_to_monte_carlo():
-    from mitpiv.studies.replications.lfpiv_vs_tomo import convergence
+    from mitpiv.replications.lfpiv_vs_tomo.study import convergence
 
     c = convergence({"convergence_random_rays": 400_000, "convergence_levels": (1.0, 4.0, 16.0)}, seed=3)
     e = c["rel_l2"]
@@ -353,8 +353,8 @@ def test_committed_rows_take_the_declared_kinds():
     import json
     from pathlib import Path
 
-    from mitpiv.studies.replication import Row, classify_rows, tally, unused_kinds
-    from mitpiv.studies.replications.lfpiv_vs_tomo import INPUTS_FROM_PAPER, KINDS
+    from mitpiv.replications.frame import Row, classify_rows, tally, unused_kinds
+    from mitpiv.replications.lfpiv_vs_tomo.study import INPUTS_FROM_PAPER, KINDS
 
     committed = Path(__file__).resolve().parents[2] / "docs" / "replications" / "lfpiv-vs-tomo" / "results.json"
     fields = {f.name for f in dataclasses.fields(Row)}

@@ -3,7 +3,7 @@ reconstruction of a 3-D flow field using a plenoptic camera" / multi-plenoptic P
 ``mitpiv replicate multi-plenoptic [--quick]``.
 
 Orchestration only: the system, images, reconstructions and metrics are
-:mod:`mitpiv.studies.multiplenoptic_sim`; eqs. 13-15 :func:`mitpiv.reconstruct.paper_refocus`
+:mod:`mitpiv.replications.multi_plenoptic.model`; eqs. 13-15 :func:`mitpiv.reconstruct.paper_refocus`
 and :func:`mitpiv.reconstruct.fuse`; eqs. 16-17 :mod:`mitpiv.analysis.quality`.
 
 Two stages, both resumable points (``ctx.map``): every camera (plenoptic or standard, one
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mitpiv.studies.replication import Curve, Kind, ReplicationResult, Row, Study, compare_trend, compare_value
+from mitpiv.replications.frame import Curve, Kind, ReplicationResult, Row, Study, compare_trend, compare_value
 
 AZIMUTHS = {1: (0.0,), 2: (0.0, 180.0), 3: (0.0, 120.0, 240.0), 4: (0.0, 90.0, 180.0, 270.0)}
 BASE_SO = 8.0  # S_o / p_M of Figs. 8-9
@@ -74,7 +74,7 @@ def camera_point(item: dict) -> dict:
 
     from mitpiv.lightfield import decode
     from mitpiv.reconstruct import paper_refocus
-    from mitpiv.studies import multiplenoptic_sim as S
+    from mitpiv.replications.multi_plenoptic import model as S
 
     t0 = time.process_time()
     so, ratio, n = item["so"], item["ratio"], item["n"]
@@ -135,7 +135,7 @@ def config_point(item: dict) -> dict:
     import time
 
     from mitpiv.reconstruct import CameraMapping, PinholeMapping, fuse, mart
-    from mitpiv.studies import multiplenoptic_sim as S
+    from mitpiv.replications.multi_plenoptic import model as S
 
     t0 = time.process_time()
     so, ratio, n = item["so"], item["ratio"], item["n"]
@@ -435,7 +435,7 @@ _OPEN_SECTION = (
 
 
 def _setup_section(n: int) -> str:
-    from mitpiv.studies import multiplenoptic_sim as S
+    from mitpiv.replications.multi_plenoptic import model as S
 
     vox = S.voxel_mm(BASE_SO)
     lo, hi, full_w = S.volume_box(BASE_SO, BASE_RATIO, n)

@@ -2,7 +2,7 @@
 light-field PIV and tomographic PIV" (seed paper 001, section 2): synthetic light-field and
 tomographic particle images of a round jet, DRT-MART and MLOS-SMART reconstructions, particle
 centres by peak centroid, two-pass multi-grid 3D PIV against the window-filtered truth (used
-by :mod:`mitpiv.studies.replications.lfpiv_vs_tomo`).
+by :mod:`mitpiv.replications.lfpiv_vs_tomo.study`).
 
 The paper's set-up (Tables 1-2) and our readings of what it leaves open:
 
@@ -323,14 +323,14 @@ def to_8bit(images) -> list[np.ndarray]:
     """Images normalised so the brightest pixel of the set is 255, rounded (the paper's 0-255)."""
     top = max(float(np.max(im)) for im in images)
     if not top > 0:
-        raise ConfigError("lfpiv_tomo_sim: the rendered images are dark (no particle in view).")
+        raise ConfigError("lfpiv-vs-tomo model: the rendered images are dark (no particle in view).")
     return [np.round(np.asarray(im, dtype=float) * (255.0 / top)) for im in images]
 
 
 def render_tomo(cams, points_mm) -> list[np.ndarray]:
     """Tomographic images (H, W) float64: pixel-integrated Gaussians of e^-2 diameter 3 px,
     a particle centred on a pixel peaking at 255 (overlaps add)."""
-    from mitpiv.studies.channel_tomo_sim import particle_table, render_particles
+    from mitpiv.replications.channel_tomo.model import particle_table, render_particles
 
     table = particle_table(TOMO["particle_diameter_px"] / 4.0)
     return render_particles(cams, np.ones(len(cams)), np.asarray(points_mm, dtype=float), table, 255.0)
@@ -398,7 +398,7 @@ def piv_errors_by_depth(vol_a, vol_b, grid: VoxelGrid, flow, dt_s: float, passes
 def _zero_lateral_boundary(vol, trim: int) -> np.ndarray:
     """A copy of a (z, y, x) volume with its ``trim`` (>= 1) outermost voxels in x and y set to 0."""
     if int(trim) != trim or trim < 1:
-        raise ConfigError(f"lfpiv_tomo_sim: 'trim' must be a whole number >= 1, got {trim!r}.")
+        raise ConfigError(f"lfpiv-vs-tomo model: 'trim' must be a whole number >= 1, got {trim!r}.")
     v = np.array(vol, copy=True)
     v[:, :trim, :] = 0
     v[:, -trim:, :] = 0

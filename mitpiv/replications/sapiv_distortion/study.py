@@ -2,7 +2,7 @@
 (Kubaczyk, MIT S.M. thesis, chapters 3-4): ``mitpiv replicate sapiv-distortion [--quick]``.
 
 Orchestration only: the system, targets, calibration and scoring are
-:mod:`mitpiv.studies.sapiv_sim`; refocusing and thresholding :mod:`mitpiv.reconstruct.sapiv`;
+:mod:`mitpiv.replications.sapiv_distortion.model`; refocusing and thresholding :mod:`mitpiv.reconstruct.sapiv`;
 the measures :mod:`mitpiv.analysis.quality` (eqs. 4.1-4.4); distortion
 :mod:`mitpiv.physics.distortion` (appendix A); the PSF :mod:`mitpiv.physics.psf` (eq. 3.4).
 """
@@ -14,7 +14,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from mitpiv.studies.replication import Curve, Kind, ReplicationResult, Study, compare_trend, compare_value
+from mitpiv.replications.frame import Curve, Kind, ReplicationResult, Study, compare_trend, compare_value
 
 D_LEVELS = (0.0, 0.1, 0.5, 1.0, 2.0)
 SA_LEVELS = (0.0, 0.02, 0.05, 0.1)
@@ -37,7 +37,7 @@ def _fmt(v: float) -> str:
 
 def _scale(quick: bool) -> dict:
     """The crop: which patches of the volume are reconstructed (full depth, 201 planes)."""
-    from mitpiv.studies.sapiv_sim import patch_centres
+    from mitpiv.replications.sapiv_distortion.model import patch_centres
 
     if quick:
         return {"patches": [(12.5, 12.5)], "patch_mm": 1.5, "densities": DENSITIES_QUICK,
@@ -82,7 +82,7 @@ def paper_kernel(sa: float) -> np.ndarray:
 @lru_cache(maxsize=8)
 def _table(sa: float, psf: str = "fourier"):
     from mitpiv.imaging import PointPSFTable
-    from mitpiv.studies.sapiv_sim import SapivSystem
+    from mitpiv.replications.sapiv_distortion.model import SapivSystem
 
     if psf == "paper":
         return PointPSFTable.from_kernel(paper_kernel(sa))
@@ -91,7 +91,7 @@ def _table(sa: float, psf: str = "fourier"):
 
 def calibration_point(item: dict) -> dict:
     """One calibration: targets rendered with the distortion and the aberration, fitted."""
-    from mitpiv.studies.sapiv_sim import SapivSystem, calibrate_from_targets
+    from mitpiv.replications.sapiv_distortion.model import SapivSystem, calibrate_from_targets
 
     s = SapivSystem()
     maps, rep = calibrate_from_targets(s, s.cameras(item["D"]), _table(item["SA"]), distortion=item["model"])
@@ -101,7 +101,7 @@ def calibration_point(item: dict) -> dict:
 def evaluation_point(item: dict) -> dict:
     """One configuration at one density: image, refocus, threshold, score."""
     from mitpiv.reconstruct.mapping import CameraMapping
-    from mitpiv.studies.sapiv_sim import SapivSystem, evaluate_point
+    from mitpiv.replications.sapiv_distortion.model import SapivSystem, evaluate_point
 
     s = SapivSystem()
     maps = [CameraMapping.from_dict(m) for m in item["mappings"]]
@@ -115,7 +115,7 @@ def evaluation_point(item: dict) -> dict:
 def diagnosis_point(item: dict) -> dict:
     """The 0 % / SA 0 point again with the raw planes kept: Q under other thresholds."""
     from mitpiv.reconstruct.mapping import CameraMapping
-    from mitpiv.studies.sapiv_sim import SapivSystem, evaluate_point
+    from mitpiv.replications.sapiv_distortion.model import SapivSystem, evaluate_point
 
     s = SapivSystem()
     maps = [CameraMapping.from_dict(m) for m in item["mappings"]]

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from mitpiv.studies.channel_tomo_sim import (
+from mitpiv.replications.channel_tomo.model import (
     PAPER_TABLE_2,
     ChannelTomoSystem,
     calibrate_pose,
@@ -17,8 +17,8 @@ from mitpiv.studies.channel_tomo_sim import (
     render_particles,
     to_8bit,
 )
-from mitpiv.studies.replication import RESULTS_KEYS, replicate
-from mitpiv.studies.replications.channel_tomo import STUDY, cost_estimate, error_decomposition, s_d
+from mitpiv.replications.channel_tomo.study import STUDY, cost_estimate, error_decomposition, s_d
+from mitpiv.replications.frame import RESULTS_KEYS, replicate
 
 from .helpers import assert_second_edition
 
@@ -181,8 +181,8 @@ def test_committed_rows_have_kinds():
     import json
     from pathlib import Path
 
-    from mitpiv.studies.replication import Row, classify_rows
-    from mitpiv.studies.replications.channel_tomo import INPUTS_FROM_PAPER, KINDS
+    from mitpiv.replications.channel_tomo.study import INPUTS_FROM_PAPER, KINDS
+    from mitpiv.replications.frame import Row, classify_rows
 
     f = Path(__file__).resolve().parents[2] / "docs" / "replications" / "channel-tomo" / "results.json"
     names = {fl.name for fl in dataclasses.fields(Row)} - {"kind", "why", "reads"}  # re-derived from KINDS

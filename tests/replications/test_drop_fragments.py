@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from mitpiv.studies.replication import RESULTS_KEYS, replicate
-from mitpiv.studies.replications.drop_fragments import STUDY
+from mitpiv.replications.drop_fragments.study import STUDY
+from mitpiv.replications.frame import RESULTS_KEYS, replicate
 
 from .helpers import assert_second_edition
 
@@ -80,7 +80,7 @@ def test_committed_rows_are_classified():
     import json
     from pathlib import Path
 
-    from mitpiv.studies.replication import Row, classify_rows, unused_kinds
+    from mitpiv.replications.frame import Row, classify_rows, unused_kinds
 
     path = Path(__file__).resolve().parents[2] / "docs" / "replications" / "drop-fragments" / "results.json"
     names = {f.name for f in dataclasses.fields(Row)}
@@ -119,7 +119,7 @@ CARD_DEPTH_BIAS_MM = 0.15
 def test_rendered_dot_cards_locate_the_dots():
     import numpy as np
 
-    from mitpiv.studies.replications.drop_fragments import _camera_and_sensor, render_dot_card_observations
+    from mitpiv.replications.drop_fragments.study import _camera_and_sensor, render_dot_card_observations
 
     cam, sensor = _camera_and_sensor({"crop_px": (420, 308), "aim_mm": (0.0, 0.0), "k1": 0.0})
     obs = render_dot_card_observations(sensor, cam, depths_mm=[-2.5, 2.5], pitch_mm=0.5, dot_mm=0.2,
@@ -154,7 +154,7 @@ def test_two_pass_matching_keeps_the_fast_fragments():
     from mitpiv.analysis.backlit import match_frames
     from mitpiv.analysis.drop_fragments import model_error, velocity_sd_for_model_error
     from mitpiv.physics.drop_impact import condition, fragment_field
-    from mitpiv.studies.replications.drop_fragments import DT_DROP_S, MATCH_RADIUS_MM, match_exposures
+    from mitpiv.replications.drop_fragments.study import DT_DROP_S, MATCH_RADIUS_MM, match_exposures
 
     row = condition(784)
     vsd = velocity_sd_for_model_error(784, 5.1, 0.263, dt_s=DT_DROP_S)
@@ -182,7 +182,7 @@ def test_in_line_hologram_focus_bias_and_its_control():
     disc's plane (within half a step); the recorded intensity's, which carries the twin
     image, is sharpest closer to the sensor and darkest farther from it (each by more than
     two steps), and the hybrid detection lands on the sensor's side."""
-    from mitpiv.studies.replications.drop_fragments import dih_focus_bias_point
+    from mitpiv.replications.drop_fragments.study import dih_focus_bias_point
 
     step = 0.05
     r = dih_focus_bias_point({"d_mm": [0.15], "distance_mm": 30.0, "step_mm": step})

@@ -12,10 +12,11 @@ import types
 
 import pytest
 
+import mitpiv.replications as replications
 from mitpiv.cli import main
 from mitpiv.errors import ConfigError
-from mitpiv.studies import replication, replications
-from mitpiv.studies.replication import (
+from mitpiv.replications import frame as replication
+from mitpiv.replications.frame import (
     RESULTS_KEYS,
     Curve,
     Kind,
@@ -149,7 +150,7 @@ def test_cli_names_unknown_studies_and_lists(toy, tmp_path, capsys):
 
 
 def test_map_on_dask_workers_gives_the_same_results(toy, tmp_path):
-    from mitpiv.studies.replication import ReplicationContext
+    from mitpiv.replications.frame import ReplicationContext
 
     ctx = ReplicationContext(name="toy", out=tmp_path, workers=2)
     got = ctx.map(_point, [2, 4, 8], key=lambda n: f"n{n}")
@@ -291,9 +292,9 @@ def test_the_code_hash_follows_the_modules_a_point_imports(tmp_path, monkeypatch
 
 
 def test_the_real_studies_hash_their_image_models():
-    mods = replication.code_modules("mitpiv.studies.replications.sapiv_distortion")
-    assert {"mitpiv.studies.sapiv_sim", "mitpiv.reconstruct.sapiv", "mitpiv.analysis.quality"} <= set(mods)
-    assert "mitpiv.studies.replication" not in mods  # the writer's changes do not invalidate points
+    mods = replication.code_modules("mitpiv.replications.sapiv_distortion.study")
+    assert {"mitpiv.replications.sapiv_distortion.model", "mitpiv.reconstruct.sapiv", "mitpiv.analysis.quality"} <= set(mods)
+    assert "mitpiv.replications.frame" not in mods  # the writer's changes do not invalidate points
 
 
 def test_reclassify_rewrites_earlier_results_without_computing(toy, tmp_path, monkeypatch):
@@ -338,7 +339,7 @@ def test_reclassify_rewrites_earlier_results_without_computing(toy, tmp_path, mo
 def test_the_committed_results_carry_the_studies_kinds_and_the_generated_tally(name):
     from pathlib import Path
 
-    from mitpiv.studies.replication import KINDS, get_study
+    from mitpiv.replications.frame import KINDS, get_study
 
     folder = Path(__file__).resolve().parents[2] / "docs" / "replications" / name
     d = json.loads((folder / "results.json").read_text())

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from mitpiv.analysis.quality import quality_q, quality_q_zero_mean
-from mitpiv.studies import multiplenoptic_sim as S
-from mitpiv.studies.replication import RESULTS_KEYS, replicate
-from mitpiv.studies.replications.multi_plenoptic import STUDY
+from mitpiv.replications.frame import RESULTS_KEYS, replicate
+from mitpiv.replications.multi_plenoptic import model as S
+from mitpiv.replications.multi_plenoptic.study import STUDY
 
 from .helpers import assert_second_edition
 
@@ -156,7 +156,7 @@ def _committed_rows():
     from dataclasses import fields
     from pathlib import Path
 
-    from mitpiv.studies.replication import Row
+    from mitpiv.replications.frame import Row
 
     f = Path(__file__).resolve().parents[2] / "docs" / "replications" / "multi-plenoptic" / "results.json"
     names = {fl.name for fl in fields(Row)}
@@ -168,8 +168,8 @@ def test_committed_rows_have_kinds_and_every_cause_is_declared():
     committed row, no physics row compares nothing, no row reads a paper result (the study takes
     none), the known caveats are in the rows' why, and the physics tally is the one the closing
     note states."""
-    from mitpiv.studies.replication import classify_rows, tally, unused_kinds
-    from mitpiv.studies.replications.multi_plenoptic import INPUTS_FROM_PAPER, KINDS
+    from mitpiv.replications.frame import classify_rows, tally, unused_kinds
+    from mitpiv.replications.multi_plenoptic.study import INPUTS_FROM_PAPER, KINDS
 
     rows = classify_rows(STUDY, _committed_rows())
     assert unused_kinds(STUDY, rows) == [] and set(KINDS) <= {r.id for r in rows}
@@ -195,8 +195,8 @@ def test_a_passing_rows_cause_reaches_the_report(tmp_path):
     import shutil
     from pathlib import Path
 
-    from mitpiv.studies.replication import classify_rows, reclassify
-    from mitpiv.studies.replications.multi_plenoptic import KINDS, _causes
+    from mitpiv.replications.frame import classify_rows, reclassify
+    from mitpiv.replications.multi_plenoptic.study import KINDS, _causes
 
     src = Path(__file__).resolve().parents[2] / "docs" / "replications" / "multi-plenoptic"
     for name in ("results.json", "report.md"):

@@ -1,6 +1,6 @@
 """The multi-plenoptic PIV study of Fahringer & Thurow as a simulation: the paper's system,
 its light-ray image model, its reconstructions and its fidelity metrics (used by
-:mod:`mitpiv.studies.replications.multi_plenoptic`).
+:mod:`mitpiv.replications.multi_plenoptic.study`).
 
 * System (Table 1): :func:`plenoptic_camera` (10 mm f/2 main lens of 5 mm aperture,
   14 um f/2 lenslets focused at infinity, 1.4 um pixels, 328 x 328 lenslets; a crop keeps
@@ -176,7 +176,7 @@ def quantise(images, bits: int = BIT_DEPTH):
     top = max(float(np.max(im)) for im in images)
     full = 2**bits - 1
     if top <= 0:
-        raise ConfigError("multiplenoptic_sim: the rendered images are dark (no particle in view).")
+        raise ConfigError("multi-plenoptic model: the rendered images are dark (no particle in view).")
     return [np.round(np.asarray(im) * (full / top)).astype(np.float32) for im in images]
 
 

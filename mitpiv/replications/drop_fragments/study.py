@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mitpiv.studies.replication import Curve, Kind, ReplicationResult, Row, Study, compare_trend, compare_value
+from mitpiv.replications.frame import Curve, Kind, ReplicationResult, Row, Study, compare_trend, compare_value
 
 DT_DROP_S = 150e-6  # "two short light pulses ... 150 us apart"
 DT_PELLET_S = 5e-6  # "an interframe time of 5 us"

@@ -4,7 +4,7 @@ The standard every replication follows is the project's REPLICATION.md: the pape
 the paper's measures by the paper's definitions, every sweep axis the paper has, the
 headline results side by side with ours, every disagreement investigated, and (its second
 edition, points 7-13) agreement that means something. This module is the frame they share;
-each study is a module of :mod:`mitpiv.studies.replications` that defines
+each study is a sub-package of :mod:`mitpiv.replications` whose ``study`` module defines
 ``STUDY = Study(...)`` with a ``run(ctx) -> ReplicationResult`` function.
 
 Rows (:class:`Row`) carry a ``kind``: ``physics`` (a prediction from inputs that do not
@@ -86,30 +86,48 @@ CI_LEVEL = 0.95
 class Row:
     """One compared quantity of a replication.
 
-    id : a stable name other tools read (``Q_D0``, ``ltpr_cross_nc4``).
-    quantity : what it is, in words.
-    paper_source : where it is in the paper (``Fig. 4-1``, ``Table 1``).
-    paper, ours : the paper's value or trend, and ours (numbers, or text for a trend); with
-        several realisations ``ours`` is their mean.
-    unit : the unit of ``paper`` and ``ours`` ("" for dimensionless).
-    tolerance : the band we hold ourselves to, and why (in words): how precisely the paper's
-        value can be read, never our result.
-    agrees : True / False where the verdict is agrees / disagrees, else None (kept for the
+    Attributes
+    ----------
+    id : str
+        A stable name other tools read (``Q_D0``, ``ltpr_cross_nc4``).
+    quantity : str
+        What it is, in words.
+    paper_source : str
+        Where it is in the paper (``Fig. 4-1``, ``Table 1``).
+    paper, ours
+        The paper's value or trend, and ours (numbers, or text for a trend); with several
+        realisations ``ours`` is their mean.
+    unit : str
+        The unit of ``paper`` and ``ours`` ("" for dimensionless).
+    tolerance : str
+        The band we hold ourselves to, and why (in words): how precisely the paper's value
+        can be read, never our result.
+    agrees : bool or None
+        True / False where the verdict is agrees / disagrees, else None (kept for the
         readers of earlier results; ``verdict`` is the three-valued outcome).
-    note : the cause of a disagreement, a caveat or a crop.
-    kind : ``physics`` (a prediction from inputs that do not contain the answer), ``input``
+    note : str
+        The cause of a disagreement, a caveat or a crop.
+    kind : str
+        ``physics`` (a prediction from inputs that do not contain the answer), ``input``
         (set from, or following directly from, a result the paper reports), ``definition``
-        (true by construction, or arithmetic on the paper's numbers) or ``info`` (context, not
-        compared). Only physics rows are counted.
-    arm : ``paper-model`` (the paper's own image model) or ``physical`` (rendered by Mitsuba).
-    verdict : ``agrees``, ``disagrees``, ``inconclusive`` (the interval is too wide to tell
-        the two apart) or ``not compared``; derived from ``agrees`` when not given.
-    ci : the 95 % interval ``[lo, hi]`` of ``ours`` over the realisations (None with one).
-    n : the number of independent realisations behind ``ours``.
-    ci_method : how ``ci`` was computed (``t``: Student-t on the mean; ``bootstrap``).
-    reads : the study's declared paper inputs (:attr:`Study.inputs_from_paper`) the value
+        (true by construction, or arithmetic on the paper's numbers) or ``info`` (context,
+        not compared). Only physics rows are counted.
+    arm : str
+        ``paper-model`` (the paper's own image model) or ``physical`` (rendered by Mitsuba).
+    verdict : str
+        ``agrees``, ``disagrees``, ``inconclusive`` (the interval is too wide to tell the two
+        apart) or ``not compared``; derived from ``agrees`` when not given.
+    ci : tuple of float or None
+        The 95 % interval ``(lo, hi)`` of ``ours`` over the realisations (None with one).
+    n : int
+        The number of independent realisations behind ``ours``.
+    ci_method : str
+        How ``ci`` was computed (``t``: Student-t on the mean; ``bootstrap``).
+    reads : tuple of str
+        The study's declared paper inputs (:attr:`Study.inputs_from_paper`) the value
         depends on; a physics row may read none.
-    why : why the row has its kind (required for non-physics rows), or a caveat of a physics
+    why : str
+        Why the row has its kind (required for non-physics rows), or a caveat of a physics
         row; printed with the row, pass or fail.
     """
 
@@ -221,6 +239,7 @@ def verdict(lo: float, hi: float, band_lo: float, band_hi: float) -> str:
     - ``inconclusive``: it meets the band but straddles an edge while wider than the band
       (always so for a one-sided band): the realisations cannot tell agreement from
       disagreement.
+
     A single value (``lo == hi``) is never inconclusive.
     """
     if hi < band_lo or lo > band_hi:
@@ -270,14 +289,18 @@ def compare_value(id: str, quantity: str, paper_source: str, paper: float, ours,
                   ci_method: str = "t") -> Row:
     """A numeric row: the paper's band is ``paper +- max(abs, rel * |paper|)``.
 
-    ours : one value, or the values of independent realisations (seeds, patches, particle
-        fields): then ``ours`` is their mean, ``ci`` its 95 % interval (``ci_method``) and the
-        verdict compares the interval with the band (:func:`verdict`); one value is judged as
-        a point (``n = 1``, no interval).
-    rel, abs : the relative and absolute tolerances (at least one). ``why`` says where the
+    Parameters
+    ----------
+    ours : float or sequence of float
+        One value, or the values of independent realisations (seeds, patches, particle
+        fields): then ``ours`` is their mean, ``ci`` its 95 % interval (``ci_method``) and
+        the verdict compares the interval with the band (:func:`verdict`); one value is
+        judged as a point (``n = 1``, no interval). A non-finite value (or realisation)
+        never agrees (and ``ours`` is written as null).
+    rel, abs : float
+        The relative and absolute tolerances (at least one). ``why`` says where the
         tolerance comes from (the paper's reading precision, ...); it is appended to the
         tolerance text.
-    A non-finite value (or realisation) never agrees (and ``ours`` is written as null).
     """
     if rel is None and abs is None:
         raise ConfigError(f"compare_value({id!r}): give a tolerance, rel= or abs= (e.g. rel=0.1 for 10 %).")
@@ -460,7 +483,7 @@ def tally_line(rows: Sequence[Row]) -> str:
 # ------------------------------------------------------------------------------ code version
 _PKG_ROOT = Path(__file__).resolve().parents[1]  # the mitpiv package folder
 #: modules whose changes do not change a point's result: the frame (writer, report) itself
-_NOT_POINT_CODE = frozenset({"mitpiv.studies.replication", "mitpiv.cli"})
+_NOT_POINT_CODE = frozenset({"mitpiv.replications.frame", "mitpiv.replications", "mitpiv.cli"})
 
 
 def _module_file(name: str) -> Path | None:
@@ -685,7 +708,7 @@ class ReplicationContext:
 
 # ------------------------------------------------------------------------------ registry
 def _registry() -> dict[str, str]:
-    from mitpiv.studies.replications import MODULES
+    from mitpiv.replications import MODULES
 
     return MODULES
 
