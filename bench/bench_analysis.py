@@ -124,11 +124,11 @@ def backlit_study():
     import mitsuba as mi
 
     from mitpiv.analysis.backlit import evaluate_detections, hybrid_detect
+    from mitpiv.calibrate import calibrate_dewarp
     from mitpiv.lightfield import decode, focal_stack
     from mitpiv.lightfield.refocus import stack_pixels
     from mitpiv.physics.droplets import drop_impact_field
     from mitpiv.render.backlit import render_backlit
-    from mitpiv.studies.kinds.backlit import calibrate_dewarp
 
     res = 1200
     s = {"type": "plenoptic", "pixel_pitch_um": 5.5, "focal_length_mm": 50.0, "f_number": 2.8, "focus_distance_mm": 100.0,

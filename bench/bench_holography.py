@@ -86,10 +86,10 @@ def big_stack(t_np_2048):
 def plenoptic_detect(sensor, pos, d, z, spp=16):
     import mitsuba as mi
 
+    from mitpiv.calibrate import calibrate_dewarp
     from mitpiv.lightfield import decode, focal_stack
     from mitpiv.lightfield.refocus import stack_pixels
     from mitpiv.render.backlit import render_backlit
-    from mitpiv.studies.kinds.backlit import calibrate_dewarp
 
     cam = mi.load_dict({"type": "scene", "sensor": sensor}).sensors()[0].camera
     dewarp, _ = calibrate_dewarp(sensor, np.linspace(z[0], z[-1], 5) * 0.8, spp=spp)

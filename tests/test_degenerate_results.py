@@ -59,7 +59,8 @@ def test_sensor_set_reports_degenerate_images():
 
 
 def test_metrics_without_a_value_are_null_with_a_reason():
-    from mitpiv.studies.kinds.tomo import headline, null_metrics
+    from mitpiv.studies.kinds.tomo import headline
+    from mitpiv.studies.shared import null_metrics
 
     m = {"Q": 0.5, "piv": {"rms_vox": [math.nan, 0.1, math.inf], "n": 0, "bias": math.nan}, "ok": None}
     with pytest.warns(MitpivWarning, match="2 metric"):
@@ -116,8 +117,8 @@ def test_an_empty_volume_has_null_quality_not_zero(tmp_path):
 
     from mitpiv.io import write_truth, write_volume
     from mitpiv.studies import load_experiment
-    from mitpiv.studies.kinds.tomo import grid_of, stage_evaluate
-    from mitpiv.studies.runner import StageContext
+    from mitpiv.studies.kinds.tomo import stage_evaluate
+    from mitpiv.studies.shared import StageContext, grid_of
 
     scene = Path(__file__).resolve().parents[1] / "scenes" / "tomo4" / "scene.xml"
     exp = tmp_path / "exp.toml"

@@ -109,7 +109,7 @@ class OpenLPTSettings:
     OpenLPT also fits its OTF in windows of ``particle_radius_px``, and subtracts and shakes
     in windows ``round(2 r)`` px wide. The sample's 2 px suits its particle images (sigma
     0.88 px) at 0.01 ppp; for denser images the window takes in the neighbours (see
-    :func:`mitpiv.studies.kinds.tracking_compare.particle_radius_px`).
+    :func:`mitpiv.studies.kinds.tracking.compare.particle_radius_px`).
     """
 
     search_radius_vox: float = 10.0

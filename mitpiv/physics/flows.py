@@ -17,6 +17,8 @@ import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
 from mitpiv.errors import ConfigError, FileFormatError, check_positive
+from mitpiv.physics.flow_base import Flow
+from mitpiv.physics.jet import NearFieldJet
 
 __all__ = [
     "FLOW_KINDS",
@@ -41,29 +43,6 @@ def _unit(v, name: str) -> np.ndarray:
     if n == 0:
         raise ConfigError(f"flow: '{name}' must be a non-zero vector, got {a.tolist()}.")
     return a / n
-
-
-class Flow:
-    """Base class: subclasses implement ``velocity(p, t)``."""
-
-    kind = "flow"
-
-    def __call__(self, p_world_mm, t_s: float = 0.0) -> np.ndarray:
-        p = np.asarray(p_world_mm, dtype=float)
-        if p.ndim != 2 or p.shape[1] != 3:
-            raise ConfigError(f"flow: points must have shape (N, 3), got {p.shape}.")
-        return self.velocity(p, float(t_s))
-
-    def velocity(self, p: np.ndarray, t: float) -> np.ndarray:  # pragma: no cover - abstract
-        raise NotImplementedError
-
-    def to_dict(self) -> dict:
-        d = {"kind": self.kind}
-        for k, v in self.__dict__.items():
-            if k.startswith("_"):
-                continue
-            d[k] = v.tolist() if isinstance(v, np.ndarray) else v
-        return d
 
 
 class _Axisymmetric(Flow):
@@ -532,9 +511,10 @@ class Channel(Flow):
         return self.friction_velocity_mm_s * (acc @ self._frame)
 
 
-#: Every flow kind by its name (the ``kind`` of a [flow] table and of a truth file's flow).
+#: Every flow kind by its name (the ``kind`` of a [flow] table and of a truth file's flow); the
+#: turbulent near-field round jet lives in its own module (:mod:`mitpiv.physics.jet`).
 FLOW_KINDS = {c.kind: c for c in (Uniform, SolidBody, LambOseen, Burgers, HillVortex, VortexRing, ABC, RoundJet,
-                                  GridFlow, Channel)}
+                                  GridFlow, Channel, NearFieldJet)}
 _KINDS = FLOW_KINDS
 
 
@@ -545,9 +525,3 @@ def flow_from_dict(d: dict) -> Flow:
     if kind not in _KINDS:
         raise ConfigError(f"flow: unknown kind {kind!r}; known: {sorted(_KINDS)}.")
     return _KINDS[kind](**d)
-
-
-# the turbulent near-field round jet lives in its own module (it imports Flow and FLOW_KINDS
-# from here and registers itself as "near_field_jet"); imported last, so either import order
-# finds the other complete enough
-import mitpiv.physics.jet  # noqa: E402, F401

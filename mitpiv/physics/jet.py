@@ -38,7 +38,7 @@ import math
 import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
-from mitpiv.physics.flows import FLOW_KINDS, Flow
+from mitpiv.physics.flow_base import Flow
 
 __all__ = ["NearFieldJet", "BROWN_ROSHKO_SPREADING", "MIXING_LAYER_RMS", "RMS_HALF_WIDTH"]
 
@@ -216,6 +216,3 @@ class NearFieldJet(Flow):
         for off, ww in zip(g, wt, strict=True):
             acc += ww * self.velocity(p + off)
         return acc
-
-
-FLOW_KINDS[NearFieldJet.kind] = NearFieldJet  # a [flow] table's kind = "near_field_jet"

@@ -1,9 +1,9 @@
 """Backlit scenes: opaque spheres (droplets, pellets) in front of a diffuse backlight, rendered
 by camera tracing through Mitsuba's ``direct`` integrator (any sensor: plenoptic, pinhole).
 
-The dot-card dewarp calibration moved to the backlit experiment kind
-(:func:`mitpiv.studies.kinds.backlit.calibrate_dewarp`); ``stack_depth`` and
-``stack_pixels`` to :mod:`mitpiv.lightfield.refocus` (still importable from here).
+The dot-card dewarp calibration moved to :func:`mitpiv.calibrate.calibrate_dewarp`;
+``stack_depth`` and ``stack_pixels`` to :mod:`mitpiv.lightfield.refocus` (still importable
+from here).
 """
 
 from __future__ import annotations

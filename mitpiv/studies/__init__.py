@@ -1,7 +1,9 @@
 """Experiments and studies: the runner (:mod:`~mitpiv.studies.runner`) that validates an
 experiment TOML against its kind's schema and takes it through the kind's stages
-(:func:`run_experiment`), the kinds (:mod:`~mitpiv.studies.kinds`: ``tomo``, ``backlit``),
-reports (:mod:`~mitpiv.studies.report`), and parameter sweeps over experiments on Dask
+(:func:`run_experiment`), the kinds (:mod:`~mitpiv.studies.kinds`: ``tomo``, ``backlit``,
+``tracking``; what several of them share, and the protocol they declare, in
+:mod:`~mitpiv.studies.shared`), reports (:mod:`~mitpiv.studies.report`), exports
+(:mod:`~mitpiv.studies.export`), and parameter sweeps over experiments on Dask
 (:func:`run_sweep`)."""
 
 from mitpiv.studies.kinds.tomo import STAGES

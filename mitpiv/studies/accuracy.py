@@ -375,15 +375,6 @@ def _stage_end_to_end(S: _Scene) -> list[Row]:
 
 
 # ------------------------------------------------------------------------- output
-def pareto_front(seconds, errors) -> np.ndarray:
-    """Mask of the points no other point beats in both time and error."""
-    t, e = np.asarray(seconds, float), np.asarray(errors, float)
-    keep = np.ones(len(t), bool)
-    for i in range(len(t)):
-        keep[i] = not np.any((t <= t[i]) & (e <= e[i]) & ((t < t[i]) | (e < e[i])))
-    return keep
-
-
 def _intro(size: str, S: _Scene, seconds: float) -> tuple[str, str]:
     return (f"Accuracy versus time ({size})",
             f"{S.p['res']}x{S.p['res']} px cameras, {len(S.positions[0])} particles ({PPP} ppp), grid "

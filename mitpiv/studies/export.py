@@ -27,6 +27,11 @@ A tomo run (:mod:`mitpiv.studies.kinds.tomo`) becomes, in ``out_dir`` (default
     ``velocity_mm_s`` per point.
 ``run.pvd``
     a ParaView collection of all of them at the frame times (open this one).
+
+A tracking run (:mod:`mitpiv.studies.kinds.tracking`) becomes ``tracks.vtu``,
+``tracks_true.vtu`` and ``run.pvd`` (:func:`export_tracking_vtk`). The export reads a run's
+records (its ``experiment.json`` and the files its stages wrote, through
+:mod:`mitpiv.studies.shared`); it imports no experiment kind.
 """
 
 from __future__ import annotations
@@ -39,8 +44,8 @@ import numpy as np
 from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.progress import Progress, bar
 
-__all__ = ["export_vtk", "export_tracker_inputs", "run_images", "found_positions", "particle_errors", "TRACK_SAMPLES",
-           "TRACKERS"]
+__all__ = ["export_vtk", "export_tracking_vtk", "export_tracker_inputs", "run_images", "found_positions",
+           "particle_errors", "TRACK_SAMPLES", "TRACKERS"]
 
 log = logging.getLogger(__name__)
 
@@ -143,9 +148,7 @@ def export_vtk(run_dir, out_dir=None, *, progress: Progress = None) -> list[Path
     run = Path(run_dir)
     exp = _experiment(run)
     if exp.get("kind") == "tracking":  # its own files: tracks and true trajectories
-        from mitpiv.studies.kinds.tracking import export_vtk as export_tracking
-
-        return export_tracking(run, out_dir, progress=progress)
+        return export_tracking_vtk(run, out_dir, progress=progress)
     if exp.get("kind", "tomo") != "tomo":
         raise ConfigError(f"export: --vtk exports tomo and tracking runs; {str(run)!r} is a {exp.get('kind')!r} run.")
     _need(run, "particles", "reconstruct", "evaluate", "piv")
@@ -207,6 +210,50 @@ def export_vtk(run_dir, out_dir=None, *, progress: Progress = None) -> list[Path
         files.append(vt.write_collection(out / "run.pvd", sorted(pvd, key=lambda x: (x[1], x[2]))))
         b.update()
     log.info("vtk export: %d files in %s (open run.pvd in ParaView)", len(files), out)
+    return files
+
+
+def export_tracking_vtk(run_dir, out_dir=None, *, progress: Progress = None) -> list[Path]:
+    """ParaView files of a finished tracking run (:mod:`mitpiv.studies.kinds.tracking`; its
+    field, track and evaluate stages finished): ``tracks.vtu`` (the tracks as polylines:
+    ``time_s``, ``velocity_mm_s``, ``velocity_error_mm_s``), ``tracks_true.vtu`` (the true
+    trajectories: ``time_s``, ``velocity_mm_s``) and ``run.pvd``. :func:`export_vtk` calls it
+    for a tracking run."""
+    from mitpiv.io import read_npz
+    from mitpiv.io.vtk import write_collection, write_tracks
+    from mitpiv.studies.shared import read_tracks, run_truth
+
+    run = Path(run_dir)
+    out = Path(out_dir) if out_dir is not None else run / "vtk"
+    out.mkdir(parents=True, exist_ok=True)
+    for st in ("field", "track", "evaluate"):
+        if not (run / st / "stage.json").is_file():
+            raise FileFormatError(f"export: the {st} stage of {str(run)!r} has not finished; run the experiment first.")
+    tr = read_tracks(run / "track" / "tracks.npz")
+    err = read_npz(run / "evaluate" / "errors.npz", what="errors")["velocity_error_mm_s"]
+    truth = run_truth(run, "field")
+    times = np.asarray(truth["times_s"], float)
+    files = []
+    with bar(2, desc="vtk", progress=progress, unit="file") as b:
+        present = tr.present
+        tid, fr = np.nonzero(present)
+        arrays = {"time_s": times[fr]}
+        if tr.velocities_mm_s is not None:
+            arrays["velocity_mm_s"] = np.nan_to_num(tr.velocities_mm_s[tid, fr])
+        arrays["velocity_error_mm_s"] = err[tid, fr]
+        files.append(write_tracks(out / "tracks.vtu", tr.positions_mm[tid, fr], tid.astype(np.int64), arrays))
+        b.update()
+        tp = truth["positions_mm"]
+        ok = np.all(np.isfinite(tp), axis=2)
+        fr2, pid = np.nonzero(ok)
+        order = np.lexsort((fr2, pid))
+        fr2, pid = fr2[order], pid[order]
+        arr2 = {"time_s": times[fr2]}
+        if truth["velocities_mm_s"] is not None and truth["velocities_mm_s"].ndim == 3:
+            arr2["velocity_mm_s"] = truth["velocities_mm_s"][fr2, pid]
+        files.append(write_tracks(out / "tracks_true.vtu", tp[fr2, pid], pid.astype(np.int64), arr2))
+        b.update()
+    files.append(write_collection(out / "run.pvd", [(f.name, 0.0) for f in files]))
     return files
 
 

@@ -322,8 +322,8 @@ def tomo_report(cfg, run_dir, results: dict, timings: dict) -> Report:
     sub-aperture mosaic of a plenoptic camera, particle errors and the particles in 3D, the
     measured flow (a slice of measured and true vectors beside the error, profiles of u, v,
     w), velocity errors, and tables."""
-    from mitpiv.studies.kinds.tomo import fmt_metric as f
-    from mitpiv.studies.kinds.tomo import grid_of, images, source_of, volume
+    from mitpiv.studies.shared import fmt_metric as f
+    from mitpiv.studies.shared import grid_of, images, source_of, volume
 
     run = Path(run_dir)
     source = source_of(cfg)
@@ -536,15 +536,15 @@ def tracking_report(cfg, run_dir, results: dict, timings: dict) -> Report:
     coloured by their velocity error, yield and ghost fraction per frame, the track-length
     histogram and the LPT Challenge's metrics."""
     from mitpiv.io import read_npz
-    from mitpiv.studies.kinds.tomo import fmt_metric as f
-    from mitpiv.studies.kinds.tracking import _frame_files, bounds_of, frame_images, read_tracks
+    from mitpiv.studies.shared import bounds_of, frame_files, frame_images, read_tracks
+    from mitpiv.studies.shared import fmt_metric as f
 
     run = Path(run_dir)
     imgs, _ = frame_images(run, 0)
     tracks = read_tracks(run / "track" / "tracks.npz")
     err = read_npz(run / "evaluate" / "errors.npz", what="errors")
     lo, hi = bounds_of(cfg)
-    figures = {"images_frame0.png": _sensor_images(imgs, _frame_files(run, 0)),
+    figures = {"images_frame0.png": _sensor_images(imgs, frame_files(run, 0)),
                "tracks_velocity_error.png": _tracks_by_error(tracks, err["velocity_error_mm_s"], lo, hi),
                "yield_per_frame.png": _yield_per_frame(err["yield_per_frame"], err["ghost_per_frame"]),
                "track_lengths.png": _track_lengths(err["length_histogram"], _true_lengths(run, lo, hi))}
@@ -642,7 +642,7 @@ def plot_sweep(table, x: str, y: str, path, *, group: str | None = None) -> None
 # ------------------------------------------------------------------ accuracy versus time
 def _pareto(rows, stage: str):
     """The log-log error-against-time plot of one stage, its Pareto front dashed."""
-    from mitpiv.studies.accuracy import pareto_front
+    from mitpiv.studies.shared import pareto_front
 
     pts = [r for r in rows if r.stage == stage and not r.knob.startswith("reference") and r.error > 0]
 

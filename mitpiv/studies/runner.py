@@ -28,9 +28,10 @@ Timings are kept in memory and written once; a skipped stage reports the time it
 it ran.
 
 Experiment kinds (:mod:`mitpiv.studies.kinds`) plug in by declaring their schema, their
-stages (functions of a :class:`StageContext`: inputs from earlier stage folders, outputs
-into their own folder, a JSON result; the files they read and the packages that shape
-their output), their summary and their report.
+stages (functions of a :class:`~mitpiv.studies.shared.StageContext`: inputs from earlier
+stage folders, outputs into their own folder, a JSON result; the files they read and the
+packages that shape their output), their summary and their report
+(:class:`~mitpiv.studies.shared.Kind`).
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ import logging
 import os
 import shutil
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -51,6 +52,7 @@ from pydantic import BaseModel
 from mitpiv.errors import ConfigError
 from mitpiv.progress import Progress, bar
 from mitpiv.studies.schema import apply_overrides, read_toml, validate
+from mitpiv.studies.shared import Kind, Stage, StageContext
 
 __all__ = ["Stage", "StageContext", "RunResult", "Kind", "load_experiment", "run_experiment", "run_config",
            "run_stages", "check_experiment", "content_hash", "experiment_key", "stage_outputs", "SCHEMA_VERSION"]
@@ -62,65 +64,6 @@ SCHEMA_VERSION = 3
 
 #: The run's summary files: removed as soon as a stage (re)runs, written when all are done.
 SUMMARY_FILES = ("metrics.json", "timings.json")
-
-#: Packages whose version is part of the key of a stage that renders.
-RENDER_PACKAGES = ("mitsuba", "drjit")
-
-
-@dataclass(frozen=True)
-class Stage:
-    """One stage of an experiment kind.
-
-    name : the stage folder's name.
-    reads : the experiment's top-level keys (tables) whose values reach this stage.
-    run : ``run(ctx) -> dict``: fills ``ctx.out`` and returns a JSON-ready result.
-    files : ``files(cfg) -> list of paths``: the files outside the run folder that the stage
-        reads (their content is part of its key); None: none.
-    packages : installed packages whose version shapes the stage's output (part of its key),
-        e.g. :data:`RENDER_PACKAGES` for a stage that renders.
-    """
-
-    name: str
-    reads: tuple[str, ...]
-    run: Callable[[StageContext], dict | None]
-    files: Callable[[BaseModel], list] | None = None
-    packages: tuple[str, ...] = ()
-
-
-@dataclass
-class StageContext:
-    """What a stage sees: the experiment, where earlier stages wrote, where it writes."""
-
-    cfg: BaseModel
-    run_dir: Path
-    out: Path
-    results: dict[str, dict]
-    timings: dict[str, float]
-    progress: Progress = None
-
-    def input(self, stage: str, name: str) -> Path:
-        """The file ``name`` that the earlier stage ``stage`` wrote."""
-        return self.run_dir / stage / name
-
-
-@dataclass(frozen=True)
-class Kind:
-    """An experiment kind: its schema, stages, summary (metrics.json) and sweep-table row."""
-
-    name: str
-    build_schema: Callable[[], type[BaseModel]]
-    stages: Callable[[BaseModel], list[Stage]]
-    summary: Callable[[BaseModel, dict], dict]
-    row: Callable[[dict], dict]
-    describe: str = ""
-    headline: Callable[[dict], str] | None = None
-    aliases: tuple[str, ...] = ()
-    prepare: Callable[[dict, Path], dict] | None = None
-
-    @property
-    def schema(self) -> type[BaseModel]:
-        """The kind's experiment model (one frozen pydantic model, a field per TOML table)."""
-        return self.build_schema()
 
 
 @dataclass

@@ -52,7 +52,7 @@ from mitpiv.studies.schema import read_toml
 
 log = logging.getLogger(__name__)
 
-__all__ = ["load_study", "run_sweep", "run_point", "point_id", "flatten"]
+__all__ = ["load_study", "run_sweep", "run_point", "point_id"]
 
 
 def __getattr__(name):
@@ -105,18 +105,6 @@ def load_study(path, *, full: bool = False) -> dict:
 
 def point_id(overrides: dict) -> str:
     return content_hash(overrides, length=12)
-
-
-def flatten(prefix, obj, out):
-    """Flatten nested metrics into table columns: ``a.b``; a 3-vector ``v`` gives ``v_x, v_y, v_z``."""
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            flatten(f"{prefix}.{k}" if prefix else str(k), v, out)
-    elif isinstance(obj, list) and all(isinstance(x, int | float) for x in obj) and len(obj) == 3:
-        for axis, v in zip("xyz", obj, strict=True):
-            out[f"{prefix}_{axis}"] = v
-    elif isinstance(obj, int | float | str | bool) or obj is None:
-        out[prefix] = obj
 
 
 def run_point(experiment_path: str, overrides: dict, out_dir: str) -> dict:

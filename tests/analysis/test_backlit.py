@@ -12,12 +12,12 @@ import pytest
 from scipy import ndimage
 
 from mitpiv.analysis.backlit import evaluate_detections, fit_dewarp, hybrid_detect, match_frames, tenengrad
+from mitpiv.calibrate import calibrate_dewarp
 from mitpiv.errors import ConfigError
 from mitpiv.lightfield import decode, focal_stack
 from mitpiv.lightfield.refocus import stack_pixels
 from mitpiv.physics.droplets import drop_impact_field, pellet_field
 from mitpiv.render.backlit import render_backlit
-from mitpiv.studies.kinds.backlit import calibrate_dewarp
 
 RES = 600
 

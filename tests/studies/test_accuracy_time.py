@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from mitpiv.errors import ConfigError
-from mitpiv.studies.accuracy import STAGES, accuracy_time, pareto_front
+from mitpiv.studies.accuracy import STAGES, accuracy_time
+from mitpiv.studies.shared import pareto_front
 
 
 @pytest.fixture(scope="module")

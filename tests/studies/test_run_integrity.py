@@ -91,7 +91,7 @@ def test_edit_then_resume_reruns_exactly_the_affected_stages(tmp_path, caplog, m
 def test_render_key_covers_the_files_the_scene_names(tmp_path):
     """scene_files: the XML and every file it names ($name substituted per frame, relative
     names against its folder); the particle files that the run makes are not inputs."""
-    from mitpiv.studies.kinds.tomo import scene_files
+    from mitpiv.studies.shared import scene_files
 
     xml = tmp_path / "s.xml"
     xml.write_text("""<scene version="3.0.0">

@@ -341,7 +341,7 @@ def test_openlpt_particle_radius_is_the_otf_half_width_at_half_maximum(tmp_path)
     calibration."""
     import json
 
-    from mitpiv.studies.kinds.tracking_compare import particle_radius_px
+    from mitpiv.studies.kinds.tracking.compare import particle_radius_px
 
     assert particle_radius_px(tmp_path) == 2.0  # no otf/otf.json
     (tmp_path / "otf").mkdir()

@@ -19,7 +19,7 @@ where it has no value):
 ``yield``, ``ghost_fraction``, ``position_error_px``
     the LPT Challenge's definitions (:mod:`mitpiv.tracking.metrics`), the same match radius
     for both trackers; ``null`` for tomographic PIV, where they do not apply
-    (:data:`~mitpiv.studies.kinds.tracking_compare.TOMO_NOT_APPLICABLE`).
+    (:data:`~mitpiv.studies.kinds.tracking.compare.TOMO_NOT_APPLICABLE`).
 ``velocity_error``
     for all three methods on the same Eulerian grid (``[evaluate] bin_mm``): the RMS over the
     bins of the difference between the method's mean velocity and the binned truth's,
@@ -110,7 +110,7 @@ def study_rows(table) -> list[dict]:
                 "binned_coverage": get("openlpt.binned_coverage"), "wall_s": get("openlpt.wall_s")},
                 status="ok" if ok else "failed", error="" if ok else str(r.get("openlpt.error")), reasons={}))
         if r.get("tomo.status") is not None and not (isinstance(r.get("tomo.status"), float)):
-            from mitpiv.studies.kinds.tracking_compare import TOMO_NOT_APPLICABLE
+            from mitpiv.studies.kinds.tracking.compare import TOMO_NOT_APPLICABLE
 
             ok = r["tomo.status"] == "ok"
             na = {k: TOMO_NOT_APPLICABLE for k in ("yield", "ghost_fraction", "position_error_px")}

@@ -1,11 +1,14 @@
 """Experiment kinds: each declares its schema (one validated table per TOML table), its
-stages, its summary (metrics.json) and its sweep-table row; :mod:`mitpiv.studies.runner`
-runs any of them. ``kind = "..."`` in an experiment file picks one (default ``"tomo"``)."""
+stages, its summary (metrics.json) and its sweep-table row (a
+:class:`~mitpiv.studies.shared.Kind`); :mod:`mitpiv.studies.runner` runs any of them.
+``kind = "..."`` in an experiment file picks one (default ``"tomo"``).
+
+A kind imports no other kind: what several need lives in :mod:`mitpiv.studies.shared`."""
 
 from __future__ import annotations
 
 from mitpiv.errors import ConfigError
-from mitpiv.studies.runner import Kind
+from mitpiv.studies.shared import Kind
 
 __all__ = ["KINDS", "get_kind"]
 

@@ -29,10 +29,8 @@ against the flow), ``report`` (report.md and figures, :mod:`mitpiv.studies.repor
 
 from __future__ import annotations
 
-import difflib
 import math
 import os
-import re
 import shutil
 from functools import cache
 from pathlib import Path
@@ -42,9 +40,26 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from mitpiv.costs import MAX_ITERATIONS
-from mitpiv.errors import ConfigError
-from mitpiv.studies.runner import RENDER_PACKAGES, Kind, Stage, StageContext
-from mitpiv.studies.schema import Table, Vec3, discriminated, model_from_signature
+from mitpiv.studies.schema import Table, Vec3, model_from_signature
+from mitpiv.studies.shared import (
+    RENDER_PACKAGES,
+    Kind,
+    SceneTable,
+    Stage,
+    StageContext,
+    count_for_density,
+    flatten,
+    flow_union,
+    fmt_metric,
+    grid_of,
+    images,
+    null_metrics,
+    resolve_scene_xml,
+    resolve_table_file,
+    scene_files,
+    source_of,
+    volume,
+)
 
 FRAMES = (0, 1)
 STAGES = ("particles", "render", "sensor", "reconstruct", "evaluate", "piv", "report", "vtk")
@@ -53,30 +68,6 @@ PosFloat = Annotated[float, Field(gt=0)]
 
 
 # ------------------------------------------------------------------------------- schema
-class SceneTable(Table):
-    """The scene: a Mitsuba scene XML with mitpiv's plugins and its $parameters."""
-
-    xml: str = Field(..., description="scene XML file (relative to the experiment file)")
-    params: dict[str, str | int | float | bool] = Field(
-        default_factory=dict, description="$name substitutions of the scene XML")
-
-    @model_validator(mode="after")
-    def _known_params(self):
-        """Every param must be a $name of the scene XML (a typo would otherwise change nothing)."""
-        try:
-            text = Path(self.xml).read_text(encoding="utf-8", errors="replace")
-        except OSError:
-            return self  # a missing file is reported where it is resolved (prepare)
-        names = set(re.findall(r"\$(\w+)", text)) | set(re.findall(r"<default\s+name=\"(\w+)\"", text)) | {"truth"}
-        unknown = sorted(set(self.params) - names)
-        if unknown:
-            hints = [f"{k!r}" + (f" (did you mean {close[0]!r}?)" if (close := difflib.get_close_matches(
-                k, sorted(names), n=1, cutoff=0.6)) else "") for k in unknown]
-            raise ValueError(f"params {', '.join(hints)} not used by {Path(self.xml).name}, whose $parameters are "
-                             f"{sorted(names - {'truth'})}; a parameter the scene does not use changes nothing")
-        return self
-
-
 class SeedingTable(Table):
     """Particles seeded uniformly in a box (mitpiv.physics.seeding.seed_box), or the user's
     own particle list (``file``)."""
@@ -129,18 +120,6 @@ class SeedingTable(Table):
             costs.check_memory(costs.particles_cost(self.count), what=f"count = {self.count}",
                                fix="seed fewer particles (count, concentration_per_mm3 or ppp)", quiet=True)
         return self
-
-
-@cache
-def flow_union(prefix: str = "Flow", dt_description: str = "time between the two frames [s]"):
-    """The ``[flow]`` table: one model per flow kind (generated from the flow classes'
-    signatures) plus ``dt_s``, discriminated by ``kind``; shared by the experiment kinds."""
-    from mitpiv.physics.flows import FLOW_KINDS
-
-    dt = (PosFloat, Field(..., description=dt_description))
-    models = {kind: model_from_signature(f"{prefix}_{kind}", cls, extra_fields={"dt_s": dt})
-              for kind, cls in FLOW_KINDS.items()}
-    return discriminated(models)
 
 
 def _flow_union():
@@ -295,33 +274,6 @@ def schema():
     return model
 
 
-def resolve_scene_xml(raw: dict, base_dir: Path) -> dict:
-    """``[scene] xml`` resolved against the experiment's folder (before validation); a
-    missing file is a ConfigError naming the key and the resolved path."""
-    scene = raw.get("scene")
-    if isinstance(scene, dict) and isinstance(scene.get("xml"), str):
-        xml = (base_dir / scene["xml"]).resolve()
-        if not xml.is_file():
-            raise ConfigError(f"experiment: [scene] xml = {scene['xml']!r} does not exist (resolved to {xml}).")
-        raw = {**raw, "scene": {**scene, "xml": str(xml)}}
-    return raw
-
-
-def resolve_table_file(raw: dict, table: str, base_dir: Path, *, hint: str = "") -> dict:
-    """``[table] file`` resolved against the experiment's folder (before validation), with its
-    content hash as ``file_sha256`` (part of the stage keys: a changed file reruns); a missing
-    file is a ConfigError naming the key, the resolved path and ``hint``."""
-    t = raw.get(table)
-    if isinstance(t, dict) and isinstance(t.get("file"), str):
-        import hashlib
-
-        f = (base_dir / t["file"]).resolve()
-        if not f.is_file():
-            raise ConfigError(f"experiment: [{table}] file = {t['file']!r} does not exist (resolved to {f}){hint}.")
-        raw = {**raw, table: {**t, "file": str(f), "file_sha256": hashlib.sha256(f.read_bytes()).hexdigest()}}
-    return raw
-
-
 def prepare(raw: dict, base_dir: Path) -> dict:
     """Resolve the scene XML and a particle list against the experiment's folder (before
     validation); the particle list's content hash joins the seeding table."""
@@ -332,13 +284,6 @@ def prepare(raw: dict, base_dir: Path) -> dict:
 
 
 # ------------------------------------------------------------------------------- stages
-def grid_of(cfg):
-    from mitpiv.grid import VoxelGrid
-
-    b = cfg.reconstruction.bounds_mm
-    return VoxelGrid.from_bounds((b[0], b[2], b[4]), (b[1], b[3], b[5]), cfg.reconstruction.voxel_mm)
-
-
 def _seeding_kwargs(s) -> dict:
     kw = s.model_dump(exclude={"box_min_mm", "box_max_mm", "proxy_radius_mm", "density_sensor", "ppp",
                                "particles_per_microlens", "file", "file_sha256"}, exclude_none=True)
@@ -377,80 +322,6 @@ def stage_particles(ctx: StageContext) -> dict:
 
 def _uses_density(cfg) -> bool:
     return cfg.seeding.ppp is not None or cfg.seeding.particles_per_microlens is not None
-
-
-def scene_files(cfg) -> list[Path]:
-    """The files outside the run folder that reading the scene touches: the scene XML and
-    every file it names (``filename`` attributes and ``<string name="filename">`` values,
-    ``$name`` substituted from its defaults and ``[scene] params``, relative names resolved
-    against its folder), except the particle files, which the run makes. Their content is
-    part of the render stage's key. Parsed with the standard library (no Mitsuba import)."""
-    import xml.etree.ElementTree as ET
-
-    xml = Path(cfg.scene.xml)
-    out = [xml]
-    try:
-        root = ET.parse(xml).getroot()
-    except (ET.ParseError, OSError):
-        return out  # the render stage reports the broken file
-    values = {d.get("name"): d.get("value") for d in root.iter("default")}
-    values.update({k: str(v) for k, v in cfg.scene.params.items()})
-    made = {id(s) for shape in root.iter("shape") if shape.get("type") in ("ellipsoidsmesh", "ellipsoids")
-            for s in shape.findall("string")}
-    names = []
-    for el in root.iter():
-        if el.get("filename"):
-            names.append(el.get("filename"))
-        elif el.tag == "string" and el.get("name") == "filename" and id(el) not in made and el.get("value"):
-            names.append(el.get("value"))
-    for n in names:
-        for frame in FRAMES:
-            v = {**values, "frame": str(frame)}
-            text = n
-            for k in sorted(v, key=len, reverse=True):  # as Mitsuba substitutes: each $name, longest first
-                text = text.replace(f"${k}", str(v[k]))
-            p = Path(text)
-            p = p if p.is_absolute() else xml.parent / p
-            if p not in out:
-                out.append(p)
-    return out
-
-
-def count_for_density(cfg, out: Path) -> int:
-    """Particle count for the target per-pixel (or per-microlens) density in one sensor."""
-    from mitpiv.io import camera_from_metadata, write_particles_ply
-    from mitpiv.physics.seeding import count_for_density as count
-    from mitpiv.render.render import sensor_model
-    from mitpiv.render.scene import load_scene
-    from mitpiv.streams import derived_seed
-
-    s = cfg.seeding
-    # the scene reads particles_$frame.ply beside itself: a copy with one-particle placeholders
-    # in a scratch folder (removed: not an output of the stage)
-    scratch = out / ".density.tmp"
-    scratch.mkdir()
-    try:
-        xml = scratch / "scene.xml"
-        shutil.copy(cfg.scene.xml, xml)
-        centre = 0.5 * (np.asarray(s.box_min_mm, float) + np.asarray(s.box_max_mm, float))
-        for k in FRAMES:
-            write_particles_ply(scratch / f"particles_{k}.ply", centre[None], 1.0, proxy_radius_mm=0.01)
-        sc = load_scene(xml, frame=0, params=cfg.scene.params)
-    finally:
-        shutil.rmtree(scratch, ignore_errors=True)
-    sensors = {(x.id() or f"sensor{i}"): x for i, x in enumerate(sc.sensors())}
-    wanted = s.density_sensor or (cfg.render.sensors or [next(iter(sensors))])[0]
-    if wanted not in sensors:
-        raise ConfigError(f"experiment: [seeding] density_sensor = {wanted!r} is not in the scene; its sensors are "
-                          f"{sorted(sensors)}.")
-    camera = camera_from_metadata({"camera": sensor_model(sensors[wanted])})
-    try:
-        # both densities given: the camera's kind picks (per microlens for a plenoptic one);
-        # the visible fraction's Monte Carlo points take a stream of their own, not the seeding's
-        return count(camera, s.box_min_mm, s.box_max_mm, ppp=s.ppp, particles_per_microlens=s.particles_per_microlens,
-                     seed=derived_seed(cfg.seed, "density", wanted))
-    except ConfigError as e:
-        raise ConfigError(f"experiment: [seeding] density sensor {wanted!r}: {e}") from None
 
 
 def stage_render(ctx: StageContext) -> dict:
@@ -494,18 +365,6 @@ def camera_budget(metas: list[dict]) -> dict:
             "pixels": int(sum(int(r[0]) * int(r[1]) for r in res))}
 
 
-def images(run: Path, frame: int, source: str):
-    """The images of one frame from the ``render`` or ``sensor`` stage: (arrays, metadata, files)."""
-    from mitpiv.io import read_exr
-
-    files = sorted((run / source).glob(f"*_frame{frame:03d}.exr"))
-    if not files:
-        raise ConfigError(f"experiment: no images of frame {frame} in {run / source}.")
-    data = [read_exr(f) for f in files]
-    return [np.asarray(img if img.ndim == 2 else img[..., 0], dtype=np.float64) for img, _ in data], \
-        [m for _, m in data], files
-
-
 def stage_sensor(ctx: StageContext) -> dict:
     from mitpiv.imaging import SensorModel, apply_sensor_set
     from mitpiv.io import write_exr
@@ -532,10 +391,6 @@ def _undistorted(meta: dict) -> dict:
     if isinstance(cam.get("distortion"), dict):
         cam["distortion"] = {k: (0.0 if isinstance(v, int | float) else v) for k, v in cam["distortion"].items()}
     return {**meta, "camera": cam}
-
-
-def source_of(cfg) -> str:
-    return "sensor" if cfg.sensor is not None else "render"
 
 
 def stage_reconstruct(ctx: StageContext) -> dict:
@@ -570,56 +425,6 @@ def stage_reconstruct(ctx: StageContext) -> dict:
             info[f"frame{frame}"] = {k: v for k, v in inf.items() if isinstance(v, int | float | str)}
         write_volume(ctx.out / f"volume_{frame}.npz", vol, {"method": r.method, "grid": grid.to_dict()})
     return info
-
-
-def volume(run: Path, frame: int):
-    from mitpiv.io import read_volume
-
-    return read_volume(run / "reconstruct" / f"volume_{frame}.npz")[0]
-
-
-def null_metrics(metrics: dict, reasons: dict, *, where: str) -> dict:
-    """Metrics with no value as ``None`` plus the reason: never NaN in a result.
-
-    Every non-finite float (NaN, inf; in lists too) becomes ``None``; the dotted path of
-    each (a list counts once) goes into ``metrics["null_reasons"]`` with the first reason of
-    ``reasons`` (``{path prefix: reason}``, ``""`` matching all) whose prefix it starts
-    with. Keys already ``None`` that ``reasons`` names exactly are listed too. A
-    :class:`~mitpiv.errors.MitpivWarning` names them.
-    """
-    import math
-    import warnings
-
-    from mitpiv.errors import MitpivWarning
-
-    nulls = {}
-
-    def reason(path):
-        return next((r for k, r in reasons.items() if path.startswith(k)), "not computable")
-
-    def walk(x, path):
-        if isinstance(x, dict):
-            return {k: walk(v, f"{path}.{k}" if path else str(k)) for k, v in x.items()}
-        if isinstance(x, list | tuple):
-            out = [walk(v, None) for v in x]
-            if any(v is None for v in out) and path is not None:
-                nulls[path] = reason(path)
-            return out
-        if x is None and path in reasons:
-            nulls[path] = reasons[path]
-        if isinstance(x, float) and not math.isfinite(x):
-            if path is not None:
-                nulls[path] = reason(path)
-            return None
-        return x
-
-    out = walk(metrics, "")
-    if nulls:
-        out["null_reasons"] = {**out.get("null_reasons", {}), **nulls}
-        first = next(iter(nulls))
-        warnings.warn(f"{where}: {len(nulls)} metric(s) have no value, e.g. {first!r}: {nulls[first]}.",
-                      MitpivWarning, stacklevel=2)
-    return out
 
 
 def stage_evaluate(ctx: StageContext) -> dict:
@@ -720,8 +525,6 @@ def row(metrics: dict) -> dict:
     """The sweep-table columns of a tomo run: frame0.*, frame1.*, piv.*, n_particles, and
     the camera budget (cameras.n, cameras.type, cameras.pixels) from which a sweep computes
     LTPR (:func:`mitpiv.studies.sweep.add_ltpr`)."""
-    from mitpiv.studies.sweep import flatten
-
     ev = metrics.get("evaluate") or {}
     out = {}
     flatten("", {"frame0": ev.get("frame0"), "frame1": ev.get("frame1"), "piv": metrics.get("piv"),
@@ -730,11 +533,6 @@ def row(metrics: dict) -> dict:
     out.update({"cameras.n": cams.get("n"), "cameras.type": "+".join(cams.get("types") or []) or None,
                 "cameras.pixels": cams.get("pixels")})
     return out
-
-
-def fmt_metric(x, spec: str) -> str:
-    """A metric for the headline and report tables: 'n/a' where it has no value."""
-    return "n/a" if x is None else format(x, spec)
 
 
 def headline(m: dict) -> str:

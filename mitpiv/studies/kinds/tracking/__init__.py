@@ -20,7 +20,7 @@ Experiment file (paths relative to it; ``mitpiv schema --kind tracking`` lists e
     [evaluate]     radius_px, bin_mm
     [output]       vtk = true: ParaView files of the tracks in RUN/vtk
     [compare]      openlpt = true, tomo = true, tomo_*: other methods on the same images (opt-in,
-                   mitpiv.studies.kinds.tracking_compare)
+                   mitpiv.studies.kinds.tracking.compare)
 
 Stages: ``field`` (seeding and advection, :func:`mitpiv.physics.sequence.advect_sequence`;
 one PLY per frame and the truth in the one truth format, with identities, velocities and
@@ -34,9 +34,15 @@ images), ``track`` (:func:`mitpiv.tracking.stb.stb`; a sequence shorter than fou
 reconstructed frame by frame with IPR and has no velocities), ``evaluate``
 (:func:`mitpiv.tracking.metrics.track_metrics` and :func:`~mitpiv.tracking.metrics.bin_tracks`),
 ``report`` (:func:`mitpiv.studies.report.tracking_report`) and ``vtk`` (with
-``[output] vtk = true``). With ``[compare]``, ``openlpt`` and ``tomo`` run between evaluate
-and report (:mod:`mitpiv.studies.kinds.tracking_compare`: OpenLPT's STB and MART + 3-D PIV
-on the same frames and cameras, scored by :func:`score_tracks` and :func:`binned_error`).
+``[output] vtk = true``, :func:`mitpiv.studies.export.export_tracking_vtk`). With
+``[compare]``, ``openlpt`` and ``tomo`` run between evaluate and report
+(:mod:`mitpiv.studies.kinds.tracking.compare`: OpenLPT's STB and MART + 3-D PIV on the same
+frames and cameras, scored by :func:`~mitpiv.studies.kinds.tracking.scoring.score_tracks`
+and :func:`~mitpiv.studies.kinds.tracking.scoring.binned_error`).
+
+The kind is a package: this module (schema, stages, summary), :mod:`.scoring` (the run's
+cameras and tracks, the truth as tracks, the scoring every method of a run shares) and
+:mod:`.compare` (the ``[compare]`` stages).
 
 The calibration runs after the rendering (the scene's cameras do not depend on it), so a
 changed calibration setting does not render again.
@@ -55,10 +61,28 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from mitpiv.errors import CalibrationError, ConfigError
-from mitpiv.studies.kinds.tomo import SceneTable, resolve_scene_xml, resolve_table_file
-from mitpiv.studies.kinds.tracking_compare import CompareTable
-from mitpiv.studies.runner import RENDER_PACKAGES, Kind, Stage, StageContext
+from mitpiv.studies.kinds.tracking.compare import CompareTable
+from mitpiv.studies.kinds.tracking.compare import stages as compare_stages
+from mitpiv.studies.kinds.tracking.compare import summary as compare_summary
+from mitpiv.studies.kinds.tracking.scoring import load_cameras, score_tracks, write_tracks_npz
 from mitpiv.studies.schema import Table, Vec3
+from mitpiv.studies.shared import (
+    RENDER_PACKAGES,
+    Kind,
+    SceneTable,
+    Stage,
+    StageContext,
+    bounds_of,
+    count_for_density,
+    flow_union,
+    frame_images,
+    null_metrics,
+    read_tracks,
+    resolve_scene_xml,
+    resolve_table_file,
+    run_truth,
+    scene_files,
+)
 
 PosFloat = Annotated[float, Field(gt=0)]
 PosInt = Annotated[int, Field(ge=1)]
@@ -102,8 +126,6 @@ class SeedingTable(Table):
 
 
 def _flow_union():
-    from mitpiv.studies.kinds.tomo import flow_union
-
     return flow_union("TrackingFlow", "time between consecutive frames [s]")
 
 
@@ -269,87 +291,13 @@ def prepare(raw: dict, base_dir: Path) -> dict:
 
 
 # ------------------------------------------------------------------------------- helpers
-def bounds_of(cfg) -> tuple[np.ndarray, np.ndarray]:
-    """The measurement box (lower, upper) [mm]: [tracking] bounds_mm or the seeding box."""
-    b = cfg.tracking.bounds_mm
-    if b is None:
-        return np.asarray(cfg.seeding.box_min_mm, float), np.asarray(cfg.seeding.box_max_mm, float)
-    return np.array([b[0], b[2], b[4]], float), np.array([b[1], b[3], b[5]], float)
-
-
-def _scene_cameras(cfg, scratch: Path) -> dict:
-    """The scene's cameras by sensor id (the scene loaded with a one-particle placeholder)."""
-    from mitpiv.io import camera_from_metadata, write_particles_ply
-    from mitpiv.render.render import sensor_model
-    from mitpiv.render.scene import load_scene
-
-    scratch.mkdir()
-    try:
-        xml = scratch / "scene.xml"
-        shutil.copy(cfg.scene.xml, xml)
-        centre = 0.5 * (np.asarray(cfg.seeding.box_min_mm, float) + np.asarray(cfg.seeding.box_max_mm, float))
-        write_particles_ply(scratch / "particles_0.ply", centre[None], 1.0, proxy_radius_mm=0.01)
-        sc = load_scene(xml, frame=0, params=cfg.scene.params)
-        return {(x.id() or f"sensor{i}"): camera_from_metadata({"camera": sensor_model(x)})
-                for i, x in enumerate(sc.sensors())}
-    finally:
-        shutil.rmtree(scratch, ignore_errors=True)
-
-
 def _count(cfg, out: Path) -> int:
-    from mitpiv.physics.seeding import count_for_density
-    from mitpiv.streams import derived_seed
-
     s = cfg.seeding
     if s.count is not None:
         return int(s.count)
     if s.concentration_per_mm3 is not None:
         return int(round(s.concentration_per_mm3 * np.prod(np.subtract(s.box_max_mm, s.box_min_mm))))
-    cams = _scene_cameras(cfg, out / ".density.tmp")
-    wanted = s.density_sensor or (cfg.render.sensors or [next(iter(cams))])[0]
-    if wanted not in cams:
-        raise ConfigError(f"experiment: [seeding] density_sensor = {wanted!r} is not in the scene; its sensors are "
-                          f"{sorted(cams)}.")
-    try:
-        return count_for_density(cams[wanted], s.box_min_mm, s.box_max_mm, ppp=s.ppp,
-                                 seed=derived_seed(cfg.seed, "density", wanted))
-    except ConfigError as e:
-        raise ConfigError(f"experiment: [seeding] density sensor {wanted!r}: {e}") from None
-
-
-def scene_files(cfg) -> list[Path]:
-    """The scene XML and the files it names (the tomo kind's rule)."""
-    from mitpiv.studies.kinds.tomo import scene_files as tomo_scene_files
-
-    return tomo_scene_files(cfg)
-
-
-def _truth(run: Path) -> dict:
-    from mitpiv.io import read_truth
-
-    return read_truth(run / "field" / "truth.npz")
-
-
-def _frame_files(run: Path, frame: int) -> list[Path]:
-    files = sorted((run / "render").glob(f"*_frame{frame:03d}.exr"))
-    if not files:
-        raise ConfigError(f"experiment: no images of frame {frame} in {run / 'render'}.")
-    return files
-
-
-def frame_images(run: Path, frame: int) -> tuple[list[np.ndarray], list[dict]]:
-    """The images (float64 (H, W)) and metadata of one frame, one per camera (sorted by id)."""
-    from mitpiv.io import read_exr
-
-    data = [read_exr(f) for f in _frame_files(run, frame)]
-    return [np.asarray(i if i.ndim == 2 else i[..., 0], dtype=np.float64) for i, _ in data], [m for _, m in data]
-
-
-def load_cameras(run: Path) -> list:
-    """The cameras the tracker uses (the calibrate stage's ``cameras.json``)."""
-    from mitpiv.io import camera_from_metadata, read_json
-
-    return [camera_from_metadata(c) for c in read_json(run / "calibrate" / "cameras.json")["cameras"]]
+    return count_for_density(cfg, out, frames=(0,))  # the scene at frame 0
 
 
 def load_otf(run: Path):
@@ -357,25 +305,6 @@ def load_otf(run: Path):
     from mitpiv.tracking import OTF
 
     return OTF.from_dict(read_json(run / "otf" / "otf.json"))
-
-
-def read_tracks(path):
-    """A :class:`~mitpiv.tracking.stb.Tracks` from the track stage's ``tracks.npz``."""
-    from mitpiv.io import read_npz
-    from mitpiv.tracking import Tracks
-
-    z = read_npz(path, what="tracks", required=("positions_mm", "intensities", "dt_s"))
-    return Tracks(z["positions_mm"], z["intensities"], float(z["dt_s"]), z.get("velocities_mm_s"),
-                  z.get("accelerations_mm_s2"), z.get("raw_positions_mm"))
-
-
-def write_tracks_npz(path, tracks) -> Path:
-    from mitpiv.io import write_npz
-
-    return write_npz(path, {"positions_mm": tracks.positions_mm, "intensities": tracks.intensities,
-                            "dt_s": np.float64(tracks.dt_s), "velocities_mm_s": tracks.velocities_mm_s,
-                            "accelerations_mm_s2": tracks.accelerations_mm_s2,
-                            "raw_positions_mm": tracks.raw_positions_mm}, owner="tracking")
 
 
 # ------------------------------------------------------------------------------- stages
@@ -504,14 +433,6 @@ def _write_cameras(out: Path, cams, true, ids, reports) -> dict:
     return {"cameras": ids, "fit_rms_px": err}
 
 
-def _calibration_error_px(cams, true, lo, hi) -> float:
-    """Largest reprojection difference [px] between fitted and true cameras over the box corners and centre."""
-    pts = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
-                   + [0.5 * (lo + hi)])
-    return float(max(np.max(np.linalg.norm(c.project(pts) - t.project(pts), axis=1)) for c, t in
-                     zip(cams, true, strict=True)))
-
-
 def stage_otf(ctx: StageContext) -> dict:
     from mitpiv.io import write_json
     from mitpiv.tracking import calibrate_otf_frames, detect_peaks, ipr, refine_otf, triangulate
@@ -534,7 +455,7 @@ def stage_otf(ctx: StageContext) -> dict:
         write_json(ctx.out / "otf.json", otf.to_dict())
         return {"sigma_max_px": otf.sigma_max_px(), "peak": [float(np.median(otf.peak[k])) for k in range(len(cams))],
                 "source": "file", "file": o.file}
-    truth = _truth(ctx.run_dir) if o.source == "truth" else None
+    truth = run_truth(ctx.run_dir, "field") if o.source == "truth" else None
     imgs_all, pts_all = [], []
 
     def load(n):  # the first n frames' images and fitted positions
@@ -632,115 +553,8 @@ def stage_track(ctx: StageContext) -> dict:
             "history": tr.history}
 
 
-def _grid(cfg, lo, hi):
-    from mitpiv.grid import VoxelGrid
-
-    b = cfg.evaluate.bin_mm
-    vox = tuple((hi - lo) / 4) if b is None else (b if isinstance(b, tuple) else (b,) * 3)
-    return VoxelGrid.from_bounds(tuple(lo), tuple(hi), vox)
-
-
-def truth_tracks(run: Path):
-    """The true trajectories of a run as :class:`~mitpiv.tracking.stb.Tracks` (particles,
-    frames, 3), with the true velocities and accelerations."""
-    from mitpiv.tracking import Tracks
-
-    truth = _truth(run)
-    pos = np.transpose(truth["positions_mm"], (1, 0, 2))
-    vel, acc = truth["velocities_mm_s"], truth["accelerations_mm_s2"]
-    vel = None if vel is None or vel.ndim != 3 else np.transpose(vel, (1, 0, 2))
-    acc = None if acc is None else np.transpose(acc, (1, 0, 2))
-    dt = np.diff(np.asarray(truth["times_s"], float))
-    return Tracks(pos, np.ones(pos.shape[:2]), float(dt[0]) if dt.size else 1.0, vel, acc)
-
-
-def eulerian_grid(cfg):
-    """The Eulerian grid every method's velocities are binned on ([evaluate] bin_mm over the
-    measurement box)."""
-    lo, hi = bounds_of(cfg)
-    return _grid(cfg, lo, hi)
-
-
-def binned_error(found_mean, found_count, ref_mean, ref_count) -> dict:
-    """Velocity error on an Eulerian grid: ``binned_mean_error_mm_s`` (RMS over the bins
-    that both fill of the difference of the mean velocities [mm/s]), ``binned_error_rel``
-    (divided by the RMS of the true bin means there) and ``binned_coverage`` (filled true bins
-    that the method fills too); NaN where no bin is shared."""
-    both = (np.asarray(found_count) > 0) & (np.asarray(ref_count) > 0)
-    d = np.asarray(found_mean)[both] - np.asarray(ref_mean)[both]
-    err = float(np.sqrt(np.mean(np.sum(d**2, axis=1)))) if d.size else float("nan")
-    ref = float(np.sqrt(np.mean(np.sum(np.asarray(ref_mean)[both] ** 2, axis=1)))) if d.size else 0.0
-    return {"binned_mean_error_mm_s": err, "binned_error_rel": err / ref if ref > 0 else float("nan"),
-            "binned_coverage": float(both.sum() / max(int((np.asarray(ref_count) > 0).sum()), 1))}
-
-
-def score_tracks(cfg, run: Path, tracks) -> dict:
-    """Score tracks of a run's sequence against its truth (the evaluate stage's scoring, for
-    mitpiv's tracks and a peer's alike).
-
-    Returns
-    -------
-    dict: ``metrics`` (:func:`~mitpiv.tracking.metrics.track_metrics` without ``per_frame``
-    and ``length_histogram``, plus ppp, the match radius, track counts, the calibration error
-    and, when the tracks carry velocities, the binned errors of :func:`binned_error`),
-    ``per_frame``, ``length_histogram``, ``velocity_error_mm_s`` ((tracks, frames), NaN where
-    unmatched) and ``binned`` (the bin arrays for ``errors.npz``; empty without velocities).
-    """
-    from mitpiv.io import camera_from_metadata, read_json
-    from mitpiv.tracking import bin_tracks, mm_per_px, track_metrics
-
-    cams = load_cameras(run)
-    true_cams = [camera_from_metadata(c) for c in read_json(run / "calibrate" / "cameras.json")["true"]]
-    truth = _truth(run)
-    ref_tracks = truth_tracks(run)
-    lo, hi = bounds_of(cfg)
-    scale = mm_per_px(true_cams, 0.5 * (lo + hi))
-    radius = cfg.evaluate.radius_px * scale
-    pos, vel, acc = ref_tracks.positions_mm, ref_tracks.velocities_mm_s, ref_tracks.accelerations_mm_s2
-    m = track_metrics(tracks, pos, radius_mm=radius, truth_velocities_mm_s=vel, truth_accelerations_mm_s2=acc,
-                      cameras=true_cams, lower_mm=lo, upper_mm=hi)
-    per_frame = m.pop("per_frame")
-    hist = m.pop("length_histogram")
-    # the image density: particles in the box seen by the first camera, per pixel
-    w, h = true_cams[0].resolution
-    p0 = truth["positions_mm"][0]
-    p0 = p0[np.all(np.isfinite(p0), axis=1)]
-    m["ppp"] = float(true_cams[0].visible(p0).sum() / (w * h))
-    m["match_radius_mm"] = radius
-    m["mm_per_px"] = scale
-    m["n_tracks"] = tracks.n_tracks
-    lengths = tracks.lengths
-    m["mean_track_length"] = float(lengths.mean()) if lengths.size else float("nan")
-    m["calibration_error_px"] = _calibration_error_px(cams, true_cams, lo, hi)
-    # per-sample errors for the report and the VTK export
-    vel_err = np.full(tracks.positions_mm.shape[:2], np.nan)
-    if tracks.velocities_mm_s is not None and vel is not None:
-        from mitpiv.analysis.particles import assign
-
-        for f in range(tracks.n_frames):
-            q, ids = tracks.frame(f)
-            t = pos[:, f]
-            ok_t = np.flatnonzero(np.all(np.isfinite(t), axis=1))
-            pr = assign(q, t[ok_t], radius)
-            vel_err[ids[pr[:, 0]], f] = np.linalg.norm(tracks.velocities_mm_s[ids[pr[:, 0]], f]
-                                                       - vel[ok_t[pr[:, 1]], f], axis=1)
-    # Eulerian binning of the tracks and of the truth on the same grid
-    binned = {}
-    if tracks.velocities_mm_s is not None and vel is not None:
-        grid = _grid(cfg, lo, hi)
-        found = bin_tracks(tracks, grid)
-        ref = bin_tracks(ref_tracks, grid)
-        m.update(binned_error(found["mean_mm_s"], found["count"], ref["mean_mm_s"], ref["count"]))
-        binned = {"bin_count": found["count"], "bin_mean_mm_s": found["mean_mm_s"], "bin_std_mm_s": found["std_mm_s"],
-                  "bin_true_mean_mm_s": ref["mean_mm_s"], "bin_origin_mm": np.asarray(grid.origin_mm, float),
-                  "bin_voxel_mm": np.asarray(grid.voxel_mm, float)}
-    return {"metrics": m, "per_frame": per_frame, "length_histogram": hist, "velocity_error_mm_s": vel_err,
-            "binned": binned}
-
-
 def stage_evaluate(ctx: StageContext) -> dict:
     from mitpiv.io import write_npz
-    from mitpiv.studies.kinds.tomo import null_metrics
 
     cfg = ctx.cfg
     tracks = read_tracks(ctx.run_dir / "track" / "tracks.npz")
@@ -782,57 +596,12 @@ def stage_report(ctx: StageContext) -> dict:
 
 
 def stage_vtk(ctx: StageContext) -> dict:
-    return {"files": [f.name for f in export_vtk(ctx.run_dir, ctx.out, progress=ctx.progress)]}
+    from mitpiv.studies.export import export_tracking_vtk
 
-
-def export_vtk(run_dir, out_dir=None, *, progress=None) -> list[Path]:
-    """ParaView files of a finished tracking run: ``tracks.vtu`` (the tracks as polylines:
-    ``time_s``, ``velocity_mm_s``, ``velocity_error_mm_s``), ``tracks_true.vtu`` (the true
-    trajectories: ``time_s``, ``velocity_mm_s``) and ``run.pvd``."""
-    from mitpiv.io.vtk import write_collection, write_tracks
-    from mitpiv.progress import bar
-
-    run = Path(run_dir)
-    out = Path(out_dir) if out_dir is not None else run / "vtk"
-    out.mkdir(parents=True, exist_ok=True)
-    for st in ("field", "track", "evaluate"):
-        if not (run / st / "stage.json").is_file():
-            from mitpiv.errors import FileFormatError
-
-            raise FileFormatError(f"export: the {st} stage of {str(run)!r} has not finished; run the experiment first.")
-    from mitpiv.io import read_npz
-
-    tr = read_tracks(run / "track" / "tracks.npz")
-    err = read_npz(run / "evaluate" / "errors.npz", what="errors")["velocity_error_mm_s"]
-    truth = _truth(run)
-    times = np.asarray(truth["times_s"], float)
-    files = []
-    with bar(2, desc="vtk", progress=progress, unit="file") as b:
-        present = tr.present
-        tid, fr = np.nonzero(present)
-        arrays = {"time_s": times[fr]}
-        if tr.velocities_mm_s is not None:
-            arrays["velocity_mm_s"] = np.nan_to_num(tr.velocities_mm_s[tid, fr])
-        arrays["velocity_error_mm_s"] = err[tid, fr]
-        files.append(write_tracks(out / "tracks.vtu", tr.positions_mm[tid, fr], tid.astype(np.int64), arrays))
-        b.update()
-        tp = truth["positions_mm"]
-        ok = np.all(np.isfinite(tp), axis=2)
-        fr2, pid = np.nonzero(ok)
-        order = np.lexsort((fr2, pid))
-        fr2, pid = fr2[order], pid[order]
-        arr2 = {"time_s": times[fr2]}
-        if truth["velocities_mm_s"] is not None and truth["velocities_mm_s"].ndim == 3:
-            arr2["velocity_mm_s"] = truth["velocities_mm_s"][fr2, pid]
-        files.append(write_tracks(out / "tracks_true.vtu", tp[fr2, pid], pid.astype(np.int64), arr2))
-        b.update()
-    files.append(write_collection(out / "run.pvd", [(f.name, 0.0) for f in files]))
-    return files
+    return {"files": [f.name for f in export_tracking_vtk(ctx.run_dir, ctx.out, progress=ctx.progress)]}
 
 
 def stages(cfg) -> list[Stage]:
-    from mitpiv.studies.kinds.tracking_compare import stages as compare_stages
-
     dens = cfg.seeding.ppp is not None
     out = [Stage("field", ("seed", "seeding", "flow", "sequence") + (("scene", "render") if dens else ()), stage_field,
                  files=scene_files if dens else None, packages=RENDER_PACKAGES if dens else ()),
@@ -858,8 +627,6 @@ METRIC_KEYS = ("yield", "ghost_fraction", "position_error_px", "position_error_m
 def summary(cfg, results: dict) -> dict:
     """metrics.json of a tracking run: the evaluate stage's metrics, the particle count and
     the tracking method."""
-    from mitpiv.studies.kinds.tracking_compare import summary as compare_summary
-
     ev = results.get("evaluate") or {}
     out = {"name": cfg.name, "seed": cfg.seed, "kind": "tracking", "evaluate": ev,
            "n_particles": (results.get("field") or {}).get("n_particles"), "frames": cfg.sequence.frames,

@@ -1,5 +1,7 @@
 """Other methods on a tracking experiment's images (issue 27, item 7): OpenLPT's
 Shake-The-Box and mitpiv's tomographic PIV, scored against the same truth as mitpiv's STB.
+The ``[compare]`` table and stages of the tracking kind (:mod:`mitpiv.studies.kinds.tracking`),
+scored by :mod:`mitpiv.studies.kinds.tracking.scoring` as the kind's evaluate stage scores.
 
 Opt-in: an experiment without a ``[compare]`` table (or with ``openlpt = false``,
 ``tomo = false``, the defaults) has no extra stage and costs nothing. With it::
@@ -17,8 +19,8 @@ outputs, so a changed ``[compare]`` setting reruns only these and the report):
     STB uses) exported by :func:`mitpiv.io.openlpt.export_openlpt` (distorted cameras with
     ``undistort=True``, the work-around of openlpt 2.2.4's stereo matching), OpenLPT run by
     :func:`mitpiv.tracking.peers.run_openlpt`, its long tracks regularised by mitpiv's
-    regularisation and scored by :func:`mitpiv.studies.kinds.tracking.score_tracks` (the
-    evaluate stage's scoring). OpenLPT's settings follow the experiment (below) unless
+    regularisation and scored by :func:`mitpiv.studies.kinds.tracking.scoring.score_tracks`
+    (the evaluate stage's scoring). OpenLPT's settings follow the experiment (below) unless
     ``openlpt_settings`` overrides them. A failure of OpenLPT (not installed, its exit status,
     a time-out, no tracks) does not fail the run: the stage records ``status = "failed"``
     and ``error``, the exact reason, and null metrics.
@@ -29,7 +31,7 @@ outputs, so a changed ``[compare]`` setting reruns only these and the report):
     :func:`mitpiv.analysis.piv3d` (velocities [mm/s] at the window centres), the valid
     vectors of all pairs averaged per bin of the evaluate stage's Eulerian grid and compared
     with the true trajectories over the same frames binned on it
-    (:func:`~mitpiv.studies.kinds.tracking.binned_error`; with all pairs, the same binned
+    (:func:`~mitpiv.studies.kinds.tracking.scoring.binned_error`; with all pairs, the same binned
     truth as the tracks').
     Yield, ghost fraction and particle position error do not apply to tomographic PIV (it
     measures window-averaged displacements of voxel intensity, not particles): they are
@@ -112,8 +114,16 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from mitpiv.errors import ConfigError
-from mitpiv.studies.runner import Stage, StageContext
+from mitpiv.studies.kinds.tracking.scoring import (
+    binned_error,
+    eulerian_grid,
+    load_cameras,
+    score_tracks,
+    truth_tracks,
+    write_tracks_npz,
+)
 from mitpiv.studies.schema import Table
+from mitpiv.studies.shared import Stage, StageContext, bounds_of, frame_images, null_metrics, run_truth
 
 PosFloat = Annotated[float, Field(gt=0)]
 Window = Annotated[int, Field(ge=4)] | tuple[Annotated[int, Field(ge=4)], Annotated[int, Field(ge=4)],
@@ -129,7 +139,7 @@ TOMO_NOT_APPLICABLE = ("tomographic PIV measures window-averaged displacements o
 
 
 class CompareTable(Table):
-    """Other methods on the same images (opt-in; mitpiv.studies.kinds.tracking_compare)."""
+    """Other methods on the same images (opt-in; mitpiv.studies.kinds.tracking.compare)."""
 
     openlpt: bool = Field(False, description="run OpenLPT's STB (PyPI openlpt) on the exported frames and score it")
     openlpt_timeout_s: PosFloat = Field(3600.0, description="OpenLPT: time limit of its run [s]")
@@ -164,7 +174,6 @@ class CompareTable(Table):
 def _scale(cfg, run: Path) -> float:
     """mm per pixel at the measurement box's centre (the true cameras)."""
     from mitpiv.io import camera_from_metadata, read_json
-    from mitpiv.studies.kinds.tracking import bounds_of
     from mitpiv.tracking import mm_per_px
 
     true = [camera_from_metadata(c) for c in read_json(run / "calibrate" / "cameras.json")["true"]]
@@ -207,13 +216,12 @@ def openlpt_settings(cfg, run: Path):
     from dataclasses import replace
 
     from mitpiv.io.openlpt import OpenLPTSettings
-    from mitpiv.studies.kinds.tracking import _truth, bounds_of
 
     t = cfg.tracking
     vox = _scale(cfg, run)
     guess = 0.0 if t.velocity_guess_mm_s is None else float(np.linalg.norm(t.velocity_guess_mm_s)) * cfg.flow.dt_s
     cover_vox = guess / vox + t.search_px
-    p0 = _truth(run)["positions_mm"][0]
+    p0 = run_truth(run, "field")["positions_mm"][0]
     n = max(int(np.all(np.isfinite(p0), axis=1).sum()), 1)
     lo, hi = bounds_of(cfg)
     spacing_mm = float(np.prod(hi - lo) / n) ** (1.0 / 3.0)
@@ -237,8 +245,6 @@ def stage_openlpt(ctx: StageContext) -> dict:
     from mitpiv.io import write_npz
     from mitpiv.io.openlpt import export_openlpt
     from mitpiv.studies.export import run_images
-    from mitpiv.studies.kinds.tomo import null_metrics
-    from mitpiv.studies.kinds.tracking import bounds_of, load_cameras, score_tracks, write_tracks_npz
     from mitpiv.tracking.peers import run_openlpt
 
     cfg, run, c = ctx.cfg, ctx.run_dir, ctx.cfg.compare
@@ -280,7 +286,6 @@ def tomo_grid(cfg, run: Path):
     """The voxel grid of the tomographic reconstruction: the measurement box, voxels of
     ``[compare] tomo_voxel_mm`` (default one pixel at the box centre)."""
     from mitpiv.grid import VoxelGrid
-    from mitpiv.studies.kinds.tracking import bounds_of
 
     lo, hi = bounds_of(cfg)
     vox = cfg.compare.tomo_voxel_mm or _scale(cfg, run)
@@ -319,8 +324,6 @@ def stage_tomo(ctx: StageContext) -> dict:
     from mitpiv.io import write_npz
     from mitpiv.reconstruct.mapping import PinholeMapping
     from mitpiv.reconstruct.tomo import WeightCache, reconstruct_volume
-    from mitpiv.studies.kinds.tomo import null_metrics
-    from mitpiv.studies.kinds.tracking import binned_error, eulerian_grid, frame_images, load_cameras, truth_tracks
     from mitpiv.tracking import Tracks, bin_tracks
 
     cfg, run, c = ctx.cfg, ctx.run_dir, ctx.cfg.compare

@@ -1,0 +1,393 @@
+"""What the experiment engine's modules share, so that no kind imports another kind and the
+runner, the report and the export read a run without importing a kind:
+
+* the kind protocol: :class:`Stage`, :class:`StageContext`, :class:`Kind` and
+  :data:`RENDER_PACKAGES` (the runner runs any kind that declares them);
+* tables several kinds declare: :class:`SceneTable`, the ``[flow]`` table
+  (:func:`flow_union`);
+* the experiment's files: :func:`resolve_scene_xml`, :func:`resolve_table_file` (before
+  validation), :func:`scene_files` (the files reading a scene touches: part of stage keys),
+  :func:`count_for_density` (a particle count for a target image density in a scene's sensor);
+* a run folder's records, as the stages wrote them: :func:`frame_files`, :func:`images`,
+  :func:`frame_images`, :func:`volume`, :func:`read_tracks`, :func:`run_truth`, and the
+  settings that locate them (:func:`grid_of`, :func:`source_of`, :func:`bounds_of`);
+* results: :func:`null_metrics` (no NaN in a result: ``None`` and the reason),
+  :func:`flatten` (nested metrics as table columns), :func:`fmt_metric`, :func:`pareto_front`.
+
+It imports nothing of :mod:`mitpiv.studies` but the schema helpers.
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+import shutil
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+from pydantic import BaseModel, Field, model_validator
+
+from mitpiv.errors import ConfigError
+from mitpiv.progress import Progress
+from mitpiv.studies.schema import Table, discriminated, model_from_signature
+
+__all__ = ["RENDER_PACKAGES", "Stage", "StageContext", "Kind", "SceneTable", "flow_union", "resolve_scene_xml",
+           "resolve_table_file", "scene_files", "count_for_density", "frame_files", "images", "frame_images",
+           "volume", "read_tracks", "run_truth", "grid_of", "source_of", "bounds_of", "null_metrics", "flatten",
+           "fmt_metric", "pareto_front"]
+
+# ------------------------------------------------------------------------------- the kind protocol
+#: Packages whose version is part of the key of a stage that renders.
+RENDER_PACKAGES = ("mitsuba", "drjit")
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One stage of an experiment kind.
+
+    name : the stage folder's name.
+    reads : the experiment's top-level keys (tables) whose values reach this stage.
+    run : ``run(ctx) -> dict``: fills ``ctx.out`` and returns a JSON-ready result.
+    files : ``files(cfg) -> list of paths``: the files outside the run folder that the stage
+        reads (their content is part of its key); None: none.
+    packages : installed packages whose version shapes the stage's output (part of its key),
+        e.g. :data:`RENDER_PACKAGES` for a stage that renders.
+    """
+
+    name: str
+    reads: tuple[str, ...]
+    run: Callable[[StageContext], dict | None]
+    files: Callable[[BaseModel], list] | None = None
+    packages: tuple[str, ...] = ()
+
+
+@dataclass
+class StageContext:
+    """What a stage sees: the experiment, where earlier stages wrote, where it writes."""
+
+    cfg: BaseModel
+    run_dir: Path
+    out: Path
+    results: dict[str, dict]
+    timings: dict[str, float]
+    progress: Progress = None
+
+    def input(self, stage: str, name: str) -> Path:
+        """The file ``name`` that the earlier stage ``stage`` wrote."""
+        return self.run_dir / stage / name
+
+
+@dataclass(frozen=True)
+class Kind:
+    """An experiment kind: its schema, stages, summary (metrics.json) and sweep-table row."""
+
+    name: str
+    build_schema: Callable[[], type[BaseModel]]
+    stages: Callable[[BaseModel], list[Stage]]
+    summary: Callable[[BaseModel, dict], dict]
+    row: Callable[[dict], dict]
+    describe: str = ""
+    headline: Callable[[dict], str] | None = None
+    aliases: tuple[str, ...] = ()
+    prepare: Callable[[dict, Path], dict] | None = None
+
+    @property
+    def schema(self) -> type[BaseModel]:
+        """The kind's experiment model (one frozen pydantic model, a field per TOML table)."""
+        return self.build_schema()
+
+
+# ------------------------------------------------------------------------------- tables
+PosFloat = Annotated[float, Field(gt=0)]
+
+
+class SceneTable(Table):
+    """The scene: a Mitsuba scene XML with mitpiv's plugins and its $parameters."""
+
+    xml: str = Field(..., description="scene XML file (relative to the experiment file)")
+    params: dict[str, str | int | float | bool] = Field(
+        default_factory=dict, description="$name substitutions of the scene XML")
+
+    @model_validator(mode="after")
+    def _known_params(self):
+        """Every param must be a $name of the scene XML (a typo would otherwise change nothing)."""
+        try:
+            text = Path(self.xml).read_text(encoding="utf-8", errors="replace")
+        except OSError:
+            return self  # a missing file is reported where it is resolved (prepare)
+        names = set(re.findall(r"\$(\w+)", text)) | set(re.findall(r"<default\s+name=\"(\w+)\"", text)) | {"truth"}
+        unknown = sorted(set(self.params) - names)
+        if unknown:
+            hints = [f"{k!r}" + (f" (did you mean {close[0]!r}?)" if (close := difflib.get_close_matches(
+                k, sorted(names), n=1, cutoff=0.6)) else "") for k in unknown]
+            raise ValueError(f"params {', '.join(hints)} not used by {Path(self.xml).name}, whose $parameters are "
+                             f"{sorted(names - {'truth'})}; a parameter the scene does not use changes nothing")
+        return self
+
+
+@cache
+def flow_union(prefix: str = "Flow", dt_description: str = "time between the two frames [s]"):
+    """The ``[flow]`` table: one model per flow kind (generated from the flow classes'
+    signatures) plus ``dt_s``, discriminated by ``kind``; shared by the experiment kinds."""
+    from mitpiv.physics.flows import FLOW_KINDS
+
+    dt = (PosFloat, Field(..., description=dt_description))
+    models = {kind: model_from_signature(f"{prefix}_{kind}", cls, extra_fields={"dt_s": dt})
+              for kind, cls in FLOW_KINDS.items()}
+    return discriminated(models)
+
+
+# ------------------------------------------------------------------------------- the experiment's files
+def resolve_scene_xml(raw: dict, base_dir: Path) -> dict:
+    """``[scene] xml`` resolved against the experiment's folder (before validation); a
+    missing file is a ConfigError naming the key and the resolved path."""
+    scene = raw.get("scene")
+    if isinstance(scene, dict) and isinstance(scene.get("xml"), str):
+        xml = (base_dir / scene["xml"]).resolve()
+        if not xml.is_file():
+            raise ConfigError(f"experiment: [scene] xml = {scene['xml']!r} does not exist (resolved to {xml}).")
+        raw = {**raw, "scene": {**scene, "xml": str(xml)}}
+    return raw
+
+
+def resolve_table_file(raw: dict, table: str, base_dir: Path, *, hint: str = "") -> dict:
+    """``[table] file`` resolved against the experiment's folder (before validation), with its
+    content hash as ``file_sha256`` (part of the stage keys: a changed file reruns); a missing
+    file is a ConfigError naming the key, the resolved path and ``hint``."""
+    t = raw.get(table)
+    if isinstance(t, dict) and isinstance(t.get("file"), str):
+        import hashlib
+
+        f = (base_dir / t["file"]).resolve()
+        if not f.is_file():
+            raise ConfigError(f"experiment: [{table}] file = {t['file']!r} does not exist (resolved to {f}){hint}.")
+        raw = {**raw, table: {**t, "file": str(f), "file_sha256": hashlib.sha256(f.read_bytes()).hexdigest()}}
+    return raw
+
+
+def scene_files(cfg, *, frames: tuple[int, ...] = (0, 1)) -> list[Path]:
+    """The files outside the run folder that reading the scene touches: the scene XML and
+    every file it names (``filename`` attributes and ``<string name="filename">`` values,
+    ``$name`` substituted from its defaults and ``[scene] params``, ``$frame`` with each of
+    ``frames``, relative names resolved against its folder), except the particle files,
+    which the run makes. Their content is part of the render stage's key. Parsed with the
+    standard library (no Mitsuba import)."""
+    import xml.etree.ElementTree as ET
+
+    xml = Path(cfg.scene.xml)
+    out = [xml]
+    try:
+        root = ET.parse(xml).getroot()
+    except (ET.ParseError, OSError):
+        return out  # the render stage reports the broken file
+    values = {d.get("name"): d.get("value") for d in root.iter("default")}
+    values.update({k: str(v) for k, v in cfg.scene.params.items()})
+    made = {id(s) for shape in root.iter("shape") if shape.get("type") in ("ellipsoidsmesh", "ellipsoids")
+            for s in shape.findall("string")}
+    names = []
+    for el in root.iter():
+        if el.get("filename"):
+            names.append(el.get("filename"))
+        elif el.tag == "string" and el.get("name") == "filename" and id(el) not in made and el.get("value"):
+            names.append(el.get("value"))
+    for n in names:
+        for frame in frames:
+            v = {**values, "frame": str(frame)}
+            text = n
+            for k in sorted(v, key=len, reverse=True):  # as Mitsuba substitutes: each $name, longest first
+                text = text.replace(f"${k}", str(v[k]))
+            p = Path(text)
+            p = p if p.is_absolute() else xml.parent / p
+            if p not in out:
+                out.append(p)
+    return out
+
+
+def count_for_density(cfg, out: Path, *, frames: tuple[int, ...] = (0, 1)) -> int:
+    """Particle count for the target per-pixel (or per-microlens) density of ``[seeding]``
+    (``ppp``, and ``particles_per_microlens`` where the kind has it) in one sensor of the
+    scene (``[seeding] density_sensor``, default the first rendered one), the scene loaded
+    at frame 0 with one-particle placeholders for ``frames`` in a scratch folder under
+    ``out``."""
+    from mitpiv.io import camera_from_metadata, write_particles_ply
+    from mitpiv.physics.seeding import count_for_density as count
+    from mitpiv.render.render import sensor_model
+    from mitpiv.render.scene import load_scene
+    from mitpiv.streams import derived_seed
+
+    s = cfg.seeding
+    # the scene reads particles_$frame.ply beside itself: a copy with one-particle placeholders
+    # in a scratch folder (removed: not an output of the stage)
+    scratch = out / ".density.tmp"
+    scratch.mkdir()
+    try:
+        xml = scratch / "scene.xml"
+        shutil.copy(cfg.scene.xml, xml)
+        centre = 0.5 * (np.asarray(s.box_min_mm, float) + np.asarray(s.box_max_mm, float))
+        for k in frames:
+            write_particles_ply(scratch / f"particles_{k}.ply", centre[None], 1.0, proxy_radius_mm=0.01)
+        sc = load_scene(xml, frame=0, params=cfg.scene.params)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    sensors = {(x.id() or f"sensor{i}"): x for i, x in enumerate(sc.sensors())}
+    wanted = s.density_sensor or (cfg.render.sensors or [next(iter(sensors))])[0]
+    if wanted not in sensors:
+        raise ConfigError(f"experiment: [seeding] density_sensor = {wanted!r} is not in the scene; its sensors are "
+                          f"{sorted(sensors)}.")
+    camera = camera_from_metadata({"camera": sensor_model(sensors[wanted])})
+    try:
+        # both densities given: the camera's kind picks (per microlens for a plenoptic one);
+        # the visible fraction's Monte Carlo points take a stream of their own, not the seeding's
+        return count(camera, s.box_min_mm, s.box_max_mm, ppp=s.ppp,
+                     particles_per_microlens=getattr(s, "particles_per_microlens", None),
+                     seed=derived_seed(cfg.seed, "density", wanted))
+    except ConfigError as e:
+        raise ConfigError(f"experiment: [seeding] density sensor {wanted!r}: {e}") from None
+
+
+# ------------------------------------------------------------------------------- a run's records
+def frame_files(run: Path, frame: int, source: str = "render") -> list[Path]:
+    """The EXR files of one frame from the ``render`` or ``sensor`` stage, one per camera
+    (sorted by sensor id)."""
+    files = sorted((run / source).glob(f"*_frame{frame:03d}.exr"))
+    if not files:
+        raise ConfigError(f"experiment: no images of frame {frame} in {run / source}.")
+    return files
+
+
+def images(run: Path, frame: int, source: str = "render"):
+    """The images of one frame from the ``render`` or ``sensor`` stage: (arrays (float64
+    (H, W)), metadata, files), one per camera (sorted by sensor id)."""
+    from mitpiv.io import read_exr
+
+    files = frame_files(run, frame, source)
+    data = [read_exr(f) for f in files]
+    return [np.asarray(img if img.ndim == 2 else img[..., 0], dtype=np.float64) for img, _ in data], \
+        [m for _, m in data], files
+
+
+def frame_images(run: Path, frame: int, source: str = "render") -> tuple[list[np.ndarray], list[dict]]:
+    """The images (float64 (H, W)) and metadata of one frame, one per camera (sorted by id)."""
+    imgs, metas, _ = images(run, frame, source)
+    return imgs, metas
+
+
+def volume(run: Path, frame: int):
+    """The reconstructed volume of one frame (the ``reconstruct`` stage's ``volume_<frame>.npz``)."""
+    from mitpiv.io import read_volume
+
+    return read_volume(run / "reconstruct" / f"volume_{frame}.npz")[0]
+
+
+def read_tracks(path):
+    """A :class:`~mitpiv.tracking.stb.Tracks` from the track stage's ``tracks.npz``."""
+    from mitpiv.io import read_npz
+    from mitpiv.tracking import Tracks
+
+    z = read_npz(path, what="tracks", required=("positions_mm", "intensities", "dt_s"))
+    return Tracks(z["positions_mm"], z["intensities"], float(z["dt_s"]), z.get("velocities_mm_s"),
+                  z.get("accelerations_mm_s2"), z.get("raw_positions_mm"))
+
+
+def run_truth(run: Path, stage: str) -> dict:
+    """The truth file a run's ``stage`` wrote (``particles`` of a tomo run, ``field`` of a
+    tracking or backlit run), :func:`mitpiv.io.read_truth`."""
+    from mitpiv.io import read_truth
+
+    return read_truth(run / stage / "truth.npz")
+
+
+def grid_of(cfg):
+    """The voxel grid of a tomo experiment's ``[reconstruction]`` (bounds_mm, voxel_mm)."""
+    from mitpiv.grid import VoxelGrid
+
+    b = cfg.reconstruction.bounds_mm
+    return VoxelGrid.from_bounds((b[0], b[2], b[4]), (b[1], b[3], b[5]), cfg.reconstruction.voxel_mm)
+
+
+def source_of(cfg) -> str:
+    """The stage whose images a tomo run reconstructs: ``sensor`` with a [sensor] table, else ``render``."""
+    return "sensor" if cfg.sensor is not None else "render"
+
+
+def bounds_of(cfg) -> tuple[np.ndarray, np.ndarray]:
+    """The measurement box (lower, upper) [mm]: [tracking] bounds_mm or the seeding box."""
+    b = cfg.tracking.bounds_mm
+    if b is None:
+        return np.asarray(cfg.seeding.box_min_mm, float), np.asarray(cfg.seeding.box_max_mm, float)
+    return np.array([b[0], b[2], b[4]], float), np.array([b[1], b[3], b[5]], float)
+
+
+# ------------------------------------------------------------------------------- results
+def null_metrics(metrics: dict, reasons: dict, *, where: str) -> dict:
+    """Metrics with no value as ``None`` plus the reason: never NaN in a result.
+
+    Every non-finite float (NaN, inf; in lists too) becomes ``None``; the dotted path of
+    each (a list counts once) goes into ``metrics["null_reasons"]`` with the first reason of
+    ``reasons`` (``{path prefix: reason}``, ``""`` matching all) whose prefix it starts
+    with. Keys already ``None`` that ``reasons`` names exactly are listed too. A
+    :class:`~mitpiv.errors.MitpivWarning` names them.
+    """
+    import math
+    import warnings
+
+    from mitpiv.errors import MitpivWarning
+
+    nulls = {}
+
+    def reason(path):
+        return next((r for k, r in reasons.items() if path.startswith(k)), "not computable")
+
+    def walk(x, path):
+        if isinstance(x, dict):
+            return {k: walk(v, f"{path}.{k}" if path else str(k)) for k, v in x.items()}
+        if isinstance(x, list | tuple):
+            out = [walk(v, None) for v in x]
+            if any(v is None for v in out) and path is not None:
+                nulls[path] = reason(path)
+            return out
+        if x is None and path in reasons:
+            nulls[path] = reasons[path]
+        if isinstance(x, float) and not math.isfinite(x):
+            if path is not None:
+                nulls[path] = reason(path)
+            return None
+        return x
+
+    out = walk(metrics, "")
+    if nulls:
+        out["null_reasons"] = {**out.get("null_reasons", {}), **nulls}
+        first = next(iter(nulls))
+        warnings.warn(f"{where}: {len(nulls)} metric(s) have no value, e.g. {first!r}: {nulls[first]}.",
+                      MitpivWarning, stacklevel=2)
+    return out
+
+
+def flatten(prefix, obj, out):
+    """Flatten nested metrics into table columns: ``a.b``; a 3-vector ``v`` gives ``v_x, v_y, v_z``."""
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            flatten(f"{prefix}.{k}" if prefix else str(k), v, out)
+    elif isinstance(obj, list) and all(isinstance(x, int | float) for x in obj) and len(obj) == 3:
+        for axis, v in zip("xyz", obj, strict=True):
+            out[f"{prefix}_{axis}"] = v
+    elif isinstance(obj, int | float | str | bool) or obj is None:
+        out[prefix] = obj
+
+
+def fmt_metric(x, spec: str) -> str:
+    """A metric for the headline and report tables: 'n/a' where it has no value."""
+    return "n/a" if x is None else format(x, spec)
+
+
+def pareto_front(seconds, errors) -> np.ndarray:
+    """Mask of the points no other point beats in both time and error."""
+    t, e = np.asarray(seconds, float), np.asarray(errors, float)
+    keep = np.ones(len(t), bool)
+    for i in range(len(t)):
+        keep[i] = not np.any((t <= t[i]) & (e <= e[i]) & ((t < t[i]) | (e < e[i])))
+    return keep
