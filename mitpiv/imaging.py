@@ -45,7 +45,7 @@ import numpy as np
 from mitpiv.errors import ConfigError, MitpivWarning, check_positive
 
 __all__ = ["SensorModel", "SensorSetResult", "apply_sensor", "apply_sensor_set", "resolve_exposure", "degenerate_counts",
-           "convolve_psf", "sensor_mean_variance", "PointPSFTable", "splat_points"]
+           "convolve_psf", "sensor_mean_variance", "PointPSFTable", "splat_points", "point_images"]
 
 _log = logging.getLogger(__name__)
 _BIT_DEPTHS = (8, 10, 12, 14, 16)
@@ -622,6 +622,32 @@ class PointPSFTable:
         fine.setflags(write=False)
         return cls(fine=fine, oversample=s, window=int(k.shape[0]))
 
+    @classmethod
+    def gaussian(cls, sigma_px: float, *, oversample: int = 9) -> PointPSFTable:
+        """Table of a circular Gaussian of standard deviation ``sigma_px`` [px] integrated over
+        square pixels (differences of the normal CDF, exact), window ``2 ceil(3 sigma) + 1``.
+
+        oversample : positive number of fine samples per pixel.
+        """
+        from scipy.special import ndtr
+
+        sigma_px = check_positive("sigma_px", sigma_px, owner="PointPSFTable.gaussian", unit="px")
+        if isinstance(oversample, bool) or int(oversample) != oversample or oversample < 1:
+            raise ConfigError(f"PointPSFTable.gaussian: 'oversample' must be a positive integer, got {oversample!r}.")
+        window = 2 * int(math.ceil(3 * sigma_px)) + 1
+        s = int(oversample)
+        size = (window + 1) * s + 1
+        t = (np.arange(size) - size // 2) / s  # pixel-centre offsets from the point [px]
+        g = ndtr((t + 0.5) / sigma_px) - ndtr((t - 0.5) / sigma_px)
+        fine = np.outer(g, g)
+        fine.setflags(write=False)
+        return cls(fine=fine, oversample=s, window=window)
+
+    def peak(self) -> float:
+        """The brightest pixel of one point centred on a pixel (its footprint sums to 1)."""
+        _, _, v = self.footprints(np.array([[0.5, 0.5]]))
+        return float(v.max())
+
     def footprints(self, uv_px) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(i0 (n,), j0 (n,), values (n, window, window)): each point's footprint, whose pixel
         ``[a, b]`` is image pixel ``(row j0 + a, column i0 + b)``; each footprint sums to 1."""
@@ -659,3 +685,17 @@ def splat_points(uv_px, resolution, table: PointPSFTable, *, weights=None, dtype
     flat = (rows * w + cols)[inside]
     img = np.bincount(flat, weights=(vals * wt[:, None, None])[inside], minlength=w * h)
     return img.reshape(h, w).astype(dtype)
+
+
+def point_images(cameras, points_mm, table: PointPSFTable, *, peak: float, factors=None) -> list[np.ndarray]:
+    """Noise-free images (H, W) float64, one per camera, of the points ``points_mm`` (n, 3)
+    [world mm]: each point projected by the camera (``project``) and splatted with ``table``
+    (:func:`splat_points`), scaled so that a point centred on a pixel peaks at
+    ``peak * factor`` (``factors``: one per camera, default 1)."""
+    scale = peak / table.peak()
+    factors = [1.0] * len(cameras) if factors is None else factors
+    out = []
+    for cam, f in zip(cameras, factors, strict=True):
+        uv = cam.project(points_mm)
+        out.append(splat_points(uv, cam.resolution, table, dtype=np.float64) * (scale * float(f)))
+    return out

@@ -273,3 +273,35 @@ def test_sensor_set_metadata_and_bad_input():
     for seed in (-1, 2.0, 2**64):
         with pytest.raises(ConfigError, match="seed"):
             apply_sensor(img, seed=seed)
+
+
+def test_gaussian_point_table_and_point_images():
+    """A point centred on a pixel peaks at ``peak * factor``; its neighbour holds the Gaussian
+    integrated over the next pixel (written afresh with erf), up to the window renormalisation."""
+    from math import erf, sqrt
+
+    from mitpiv.imaging import PointPSFTable, point_images
+    from mitpiv.physics.camera import PinholeCamera
+
+    sigma = 0.6
+    table = PointPSFTable.gaussian(sigma)
+    assert table.window == 2 * 2 + 1 and table.oversample == 9
+
+    def pixel(a, b):  # 1D Gaussian integrated over [a, b] [px]
+        return 0.5 * (erf(b / (sqrt(2) * sigma)) - erf(a / (sqrt(2) * sigma)))
+
+    cam = PinholeCamera((32, 32), 50.0, 10.0, position_mm=(0.0, 0.0, -500.0))
+    o, d = cam.pixel_to_ray(np.array([16.5, 16.5]))
+    p = (o + d * (500.0 / d[2]))[None, :]
+    img, dim = point_images([cam, cam], p, table, peak=200.0, factors=[1.0, 0.25])
+    assert img.dtype == np.float64 and img.max() == pytest.approx(200.0, rel=1e-9)
+    assert dim.max() == pytest.approx(50.0, rel=1e-9)
+    j, i = np.unravel_index(int(img.argmax()), img.shape)
+    assert (j, i) == (16, 16)
+    assert img[j, i + 1] / img[j, i] == pytest.approx(pixel(0.5, 1.5) / pixel(-0.5, 0.5), rel=1e-9)
+    assert point_images([cam], p, table, peak=200.0)[0] == pytest.approx(img)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ConfigError, match="sigma_px"):
+            PointPSFTable.gaussian(bad)
+    with pytest.raises(ConfigError, match="oversample"):
+        PointPSFTable.gaussian(1.0, oversample=0)

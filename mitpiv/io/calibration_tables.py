@@ -163,6 +163,23 @@ def _read_json(path: Path, src: str) -> dict:
     return d
 
 
+def _read_table(path, owner: str):
+    """(src, format, settings, data) of a calibration table: ``"csv"`` with data (header,
+    rows) or ``"json"`` with the file's object; ``src`` names ``owner`` and the file in messages."""
+    path = Path(path)
+    src = f"{owner}: {str(path)!r}"
+    if not path.is_file():
+        raise FileFormatError(f"{src} does not exist.")
+    suf = path.suffix.lower()
+    if suf == ".csv":
+        settings, header, body = _read_csv(path, src)
+        return src, "csv", settings, (header, body)
+    if suf == ".json":
+        d = _read_json(path, src)
+        return src, "json", {k: d[k] for k in _SETTINGS if k in d}, d
+    raise ConfigError(f"{src} must end in .csv or .json.")
+
+
 def _number(v, what, src):
     try:
         x = float(v)
@@ -286,14 +303,10 @@ def read_dlt_table(path) -> tuple[list[dict], dict]:
     ConfigError
         Unknown pixel convention or length unit.
     """
-    path = Path(path)
-    src = f"read_dlt_table: {str(path)!r}"
-    if not path.is_file():
-        raise FileFormatError(f"{src} does not exist.")
-    suf = path.suffix.lower()
+    src, fmt, settings, data = _read_table(path, "read_dlt_table")
     entries = []
-    if suf == ".csv":
-        settings, header, body = _read_csv(path, src)
+    if fmt == "csv":
+        header, body = data
         if all(k in header for k in _DLT_L):
             keys, kind = _DLT_L, "L"
         elif all(k in header for k in _DLT_P):
@@ -311,10 +324,8 @@ def read_dlt_table(path) -> tuple[list[dict], dict]:
             name = row.get("camera") or row.get("name") or f"cam{n}"
             vals = _numbers([row[k] for k in keys], f"camera {name!r} {kind}", src)
             entries.append((name, kind, vals, row))
-    elif suf == ".json":
-        d = _read_json(path, src)
-        settings = {k: d[k] for k in _SETTINGS if k in d}
-        for n, c in enumerate(d["cameras"]):
+    else:
+        for n, c in enumerate(data["cameras"]):
             if not isinstance(c, dict):
                 raise FileFormatError(f"{src}: cameras[{n}] must be an object with 'L' (11 numbers) or 'P' (3x4).")
             name = str(c.get("name", f"cam{n}"))
@@ -324,8 +335,6 @@ def read_dlt_table(path) -> tuple[list[dict], dict]:
                 entries.append((name, "P", _numbers(c["P"], f"camera {name!r} P", src), c))
             else:
                 raise FileFormatError(f"{src}: camera {name!r} has neither 'L' (the 11 DLT parameters) nor 'P' (3x4).")
-    else:
-        raise ConfigError(f"{src} must end in .csv or .json.")
     c0, unit = _common(settings, src)
     records = []
     for name, kind, vals, entry in entries:
@@ -364,6 +373,19 @@ def _resolution_pitch(rec, resolution, pixel_pitch_um, src):
     return res, float(pitch)
 
 
+def _table_cameras(src, path, records, build, *, camera, expected_cameras, resolution, pixel_pitch_um):
+    """``(camera, info)`` of each record of a table, or of the one named ``camera``:
+    ``build(record, resolution, pixel_pitch_um)`` gives the camera and its info."""
+    _check_count(records, expected_cameras, src)
+    chosen = records if camera is None else [select_camera(records, camera, path=path)]
+    out = []
+    for rec in chosen:
+        res, pitch = _resolution_pitch(rec, resolution, pixel_pitch_um, src)
+        cam, info = build(rec, res, pitch)
+        out.append((cam, {"name": rec["name"], **info}))
+    return out[0] if camera is not None else out
+
+
 def read_dlt_cameras(path, *, camera=None, pixel_pitch_um: float | None = None, resolution=None,
                      max_residual_px: float = DEFAULT_MAX_RESIDUAL_PX, volume_mm=None,
                      expected_cameras: int | None = None, f_number: float | None = None,
@@ -393,18 +415,13 @@ def read_dlt_cameras(path, *, camera=None, pixel_pitch_um: float | None = None, 
     list of (PinholeCamera, dict)
         Each camera and ``info`` (``name``, fx, fy, skew, the approximation's residual).
     """
-    src = f"read_dlt_cameras: {str(path)!r}"
-    records, _ = read_dlt_table(path)
-    _check_count(records, expected_cameras, src)
-    chosen = records if camera is None else [select_camera(records, camera, path=path)]
-    out = []
-    for rec in chosen:
-        res, pitch = _resolution_pitch(rec, resolution, pixel_pitch_um, src)
-        cam, info = camera_from_projection(rec["P"], resolution=res, pixel_pitch_um=pitch, name=rec["name"],
-                                           max_residual_px=max_residual_px, volume_mm=volume_mm, f_number=f_number,
-                                           focus_distance_mm=focus_distance_mm)
-        out.append((cam, {"name": rec["name"], **info}))
-    return out[0] if camera is not None else out
+    def build(rec, res, pitch):
+        return camera_from_projection(rec["P"], resolution=res, pixel_pitch_um=pitch, name=rec["name"],
+                                      max_residual_px=max_residual_px, volume_mm=volume_mm, f_number=f_number,
+                                      focus_distance_mm=focus_distance_mm)
+
+    return _table_cameras(f"read_dlt_cameras: {str(path)!r}", path, read_dlt_table(path)[0], build, camera=camera,
+                          expected_cameras=expected_cameras, resolution=resolution, pixel_pitch_um=pixel_pitch_um)
 
 
 def _write_table(path, settings: dict, header, rows) -> Path:
@@ -502,14 +519,10 @@ def read_polynomial_table(path) -> tuple[list[dict], dict]:
     ConfigError
         Unknown pixel convention or length unit.
     """
-    path = Path(path)
-    src = f"read_polynomial_table: {str(path)!r}"
-    if not path.is_file():
-        raise FileFormatError(f"{src} does not exist.")
-    suf = path.suffix.lower()
+    src, fmt, settings, data = _read_table(path, "read_polynomial_table")
     cams = []  # (name, u, v, centre, scale, entry)
-    if suf == ".csv":
-        settings, header, body = _read_csv(path, src)
+    if fmt == "csv":
+        header, body = data
         if "coordinate" not in header:
             raise FileFormatError(f"{src}: the header needs a 'coordinate' column (u or v) and one column per term.")
         skip = {"camera", "name", "coordinate", *_NORM, *_PER_CAMERA}
@@ -536,12 +549,10 @@ def read_polynomial_table(path) -> tuple[list[dict], dict]:
             centre = [nm.get(k, 0.0) for k in _NORM[:3]]
             scale = [nm.get(k, 1.0) for k in _NORM[3:]]
             cams.append((name, c["u"], c["v"], np.array(centre), np.array(scale), c["entry"]))
-    elif suf == ".json":
-        d = _read_json(path, src)
-        settings = {k: d[k] for k in _SETTINGS if k in d}
-        names = d.get("terms", [term_name(t) for t in SOLOFF_TERMS])
+    else:
+        names = data.get("terms", [term_name(t) for t in SOLOFF_TERMS])
         terms, order = _term_order(names, src)
-        for n, c in enumerate(d["cameras"]):
+        for n, c in enumerate(data["cameras"]):
             name = str(c.get("name", f"cam{n}")) if isinstance(c, dict) else f"cam{n}"
             if not isinstance(c, dict) or "u" not in c or "v" not in c:
                 raise FileFormatError(f"{src}: camera {name!r} needs 'u' and 'v' coefficient lists.")
@@ -550,8 +561,6 @@ def read_polynomial_table(path) -> tuple[list[dict], dict]:
             centre = _numbers(c.get("centre", [0, 0, 0]), f"camera {name!r} centre", src, 3)
             scale = _numbers(c.get("scale", [1, 1, 1]), f"camera {name!r} scale", src, 3)
             cams.append((name, u, v, centre, scale, c))
-    else:
-        raise ConfigError(f"{src} must end in .csv or .json.")
     c0, unit = _common(settings, src)
     vol = settings.get("volume_mm")
     if vol is not None:
@@ -606,21 +615,16 @@ def read_polynomial_cameras(path, *, camera=None, volume_mm=None, pixel_pitch_um
     list of (PinholeCamera, dict)
         Each camera and ``info`` (``name``, ``rms_px``, ``max_px``, points used).
     """
-    src = f"read_polynomial_cameras: {str(path)!r}"
-    records, _ = read_polynomial_table(path)
-    _check_count(records, expected_cameras, src)
-    chosen = records if camera is None else [select_camera(records, camera, path=path)]
-    out = []
-    for rec in chosen:
-        res, pitch = _resolution_pitch(rec, resolution, pixel_pitch_um, src)
+    def build(rec, res, pitch):
         vol = volume_mm if volume_mm is not None else rec["volume_mm"]
-        cam, info = camera_from_polynomial(rec["coefficients"], terms=rec["terms"], centre_mm=rec["centre_mm"],
-                                           scale_mm=rec["scale_mm"], volume_mm=vol, resolution=res,
-                                           pixel_pitch_um=pitch, name=rec["name"], distortion=distortion,
-                                           max_residual_px=max_residual_px, f_number=f_number,
-                                           focus_distance_mm=focus_distance_mm)
-        out.append((cam, {"name": rec["name"], **info}))
-    return out[0] if camera is not None else out
+        return camera_from_polynomial(rec["coefficients"], terms=rec["terms"], centre_mm=rec["centre_mm"],
+                                      scale_mm=rec["scale_mm"], volume_mm=vol, resolution=res, pixel_pitch_um=pitch,
+                                      name=rec["name"], distortion=distortion, max_residual_px=max_residual_px,
+                                      f_number=f_number, focus_distance_mm=focus_distance_mm)
+
+    return _table_cameras(f"read_polynomial_cameras: {str(path)!r}", path, read_polynomial_table(path)[0], build,
+                          camera=camera, expected_cameras=expected_cameras, resolution=resolution,
+                          pixel_pitch_um=pixel_pitch_um)
 
 
 def write_polynomial_table(path, cameras, *, volume_mm=None, names=None, terms=SOLOFF_TERMS,

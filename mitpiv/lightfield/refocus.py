@@ -47,7 +47,7 @@ def _kernels():
     if _KERNELS:
         return _KERNELS
     # helpers called by other kernels: module globals, not closure cells (see mitpiv._numba)
-    global on_grid, cell, bilinear, result
+    global on_grid, cell, nodes, bilinear, accumulate, result
     nb = numba()
 
     @nb.njit(inline="always", cache=True)
@@ -64,8 +64,31 @@ def _kernels():
         return x0, x - x0, min(x0 + 1, n - 1)
 
     @nb.njit(inline="always", cache=True)
+    def nodes(x, n, nearest):
+        """:func:`cell` of the sample at x on a grid of n nodes (rounded to the nearest node
+        when ``nearest``); lower node -1 when it falls outside the grid."""
+        x = on_grid(x, n)
+        if math.isnan(x):
+            return -1, 0.0, -1
+        if nearest:
+            x = math.floor(x + 0.5)
+        return cell(x, n)
+
+    @nb.njit(inline="always", cache=True)
     def bilinear(img, y0, fy, y1, x0, fx, x1):
         return (1.0 - fy) * ((1.0 - fx) * img[y0, x0] + fx * img[y0, x1]) + fy * ((1.0 - fx) * img[y1, x0] + fx * img[y1, x1])
+
+    @nb.njit(inline="always", cache=True)
+    def accumulate(acc, wacc, dark, wt, val, mult):
+        """A view's sample ``val`` of weight ``wt`` added to an output point's sums: the value
+        (additive) or its log (multiplicative, where a dark sample darkens the point)."""
+        if not mult:
+            acc += wt * val
+        elif val > 0.0:
+            acc += wt * math.log(val)
+        else:
+            dark = True
+        return acc, wacc + wt, dark
 
     @nb.njit(inline="always", cache=True)
     def result(acc, wacc, dark, wmin, mult):
@@ -82,32 +105,20 @@ def _kernels():
             wacc = np.zeros(m)
             dark = np.zeros(m, np.bool_)
             for iv in range(nv):
-                y = on_grid(base_t[ti] + sh_v[iv], nt)
-                if math.isnan(y):
+                y0, fy, y1 = nodes(base_t[ti] + sh_v[iv], nt, nearest)
+                if y0 < 0:
                     continue
-                if nearest:
-                    y = math.floor(y + 0.5)
-                y0, fy, y1 = cell(y, nt)
                 for iu in range(nu):
                     wt = w[iv, iu]
                     if wt <= 0.0:
                         continue
                     img = views[iv, iu]
                     for si in range(m):
-                        x = on_grid(base_s[si] + sh_u[iu], ns)
-                        if math.isnan(x):
+                        x0, fx, x1 = nodes(base_s[si] + sh_u[iu], ns, nearest)
+                        if x0 < 0:
                             continue
-                        if nearest:
-                            x = math.floor(x + 0.5)
-                        x0, fx, x1 = cell(x, ns)
                         val = bilinear(img, y0, fy, y1, x0, fx, x1)
-                        if not mult:
-                            acc[si] += wt * val
-                        elif val > 0.0:
-                            acc[si] += wt * math.log(val)
-                        else:
-                            dark[si] = True
-                        wacc[si] += wt
+                        acc[si], wacc[si], dark[si] = accumulate(acc[si], wacc[si], dark[si], wt, val, mult)
             for si in range(m):
                 out[ti, si] = result(acc[si], wacc[si], dark[si], wmin, mult)
 
@@ -133,13 +144,7 @@ def _kernels():
                         continue
                     x0, fx, x1 = cell(x, ns)
                     val = bilinear(views[iv, iu], y0, fy, y1, x0, fx, x1)
-                    if not mult:
-                        acc += wt * val
-                    elif val > 0.0:
-                        acc += wt * math.log(val)
-                    else:
-                        dark = True
-                    wacc += wt
+                    acc, wacc, dark = accumulate(acc, wacc, dark, wt, val, mult)
             out[k] = result(acc, wacc, dark, wmin, mult)
 
     @nb.njit(cache=True)
@@ -151,14 +156,10 @@ def _kernels():
         for p in range(shifts.shape[0]):
             for a in range(shifts.shape[1]):
                 for i in range(base.shape[0]):
-                    x = on_grid(base[i] + shifts[p, a], n)
-                    if math.isnan(x):
-                        lo[p, a, i] = -1
-                        continue
-                    if nearest:
-                        x = math.floor(x + 0.5)
-                    x0, fx, x1 = cell(x, n)
+                    x0, fx, x1 = nodes(base[i] + shifts[p, a], n, nearest)
                     lo[p, a, i] = x0
+                    if x0 < 0:
+                        continue
                     frac[p, a, i] = fx
                     hi[p, a, i] = x1
 
@@ -197,13 +198,7 @@ def _kernels():
                         fx = fxs[si]
                         x1 = x1s[si]
                         val = (1.0 - fy) * ((1.0 - fx) * r0[x0] + fx * r0[x1]) + fy * ((1.0 - fx) * r1[x0] + fx * r1[x1])
-                        if not mult:
-                            acc[si] += wt * val
-                        elif val > 0.0:
-                            acc[si] += wt * math.log(val)
-                        else:
-                            dark[si] = True
-                        wacc[si] += wt
+                        acc[si], wacc[si], dark[si] = accumulate(acc[si], wacc[si], dark[si], wt, val, mult)
             for si in range(ns):
                 out[p, ti, si] = result(acc[si], wacc[si], dark[si], wmin, mult)
 

@@ -34,7 +34,7 @@ def kernels() -> dict:
     if _K:
         return _K
     # helpers called by other kernels: module globals, not closure cells (see mitpiv._numba)
-    global _solve
+    global _solve, _window
     nb = numba()
 
     @nb.njit(cache=True)
@@ -71,6 +71,14 @@ def kernels() -> dict:
             b[col] = acc / a[col, col]
         return True
 
+    @nb.njit(inline="always", cache=True)
+    def _window(u, v, r, w, h):
+        """Rows [r0, r1) and columns [c0, c1) of the (2r+1)^2 window around pixel
+        ``floor(u, v)``, clipped to a W x H image."""
+        i0 = int(math.floor(u))
+        j0 = int(math.floor(v))
+        return max(j0 - r, 0), min(j0 + r + 1, h), max(i0 - r, 0), min(i0 + r + 1, w)
+
     @nb.njit(cache=True)
     def shake_pass(res, wh, uv, jac, vis, a, b, c, pk, p, e, order, s, r, fixed_intensity):
         """One sequential shake of every particle (see the module notes).
@@ -98,15 +106,10 @@ def kernels() -> dict:
                 w, h = wh[k, 0], wh[k, 1]
                 u, v = uv[k, i, 0], uv[k, i, 1]
                 ak, bk, ck, pkk = a[k, i], b[k, i], c[k, i], pk[k, i]
-                i0 = int(math.floor(u))
-                j0 = int(math.floor(v))
-                for row in range(j0 - r, j0 + r + 1):
-                    if row < 0 or row >= h:
-                        continue
+                r0, r1, c0, c1 = _window(u, v, r, w, h)
+                for row in range(r0, r1):
                     dv = row + 0.5 - v
-                    for col in range(i0 - r, i0 + r + 1):
-                        if col < 0 or col >= w:
-                            continue
+                    for col in range(c0, c1):
                         du = col + 0.5 - u
                         g = pkk * math.exp(-0.5 * (ak * du * du + 2.0 * bk * du * dv + ck * dv * dv))
                         eg = ei * g
@@ -146,16 +149,11 @@ def kernels() -> dict:
                 un = u + jac[k, i, 0, 0] * dp[0] + jac[k, i, 0, 1] * dp[1] + jac[k, i, 0, 2] * dp[2]
                 vn = v + jac[k, i, 1, 0] * dp[0] + jac[k, i, 1, 1] * dp[1] + jac[k, i, 1, 2] * dp[2]
                 ak, bk, ck, pkk = a[k, i], b[k, i], c[k, i], pk[k, i]
-                i0 = int(math.floor(u))
-                j0 = int(math.floor(v))
-                for row in range(j0 - r, j0 + r + 1):
-                    if row < 0 or row >= h:
-                        continue
+                r0, r1, c0, c1 = _window(u, v, r, w, h)
+                for row in range(r0, r1):
                     dv = row + 0.5 - v
                     dvn = row + 0.5 - vn
-                    for col in range(i0 - r, i0 + r + 1):
-                        if col < 0 or col >= w:
-                            continue
+                    for col in range(c0, c1):
                         du = col + 0.5 - u
                         dun = col + 0.5 - un
                         old = ei * pkk * math.exp(-0.5 * (ak * du * du + 2.0 * bk * du * dv + ck * dv * dv))
@@ -174,11 +172,10 @@ def kernels() -> dict:
                 continue
             if u < -r - 1.0 or v < -r - 1.0 or u > w + r + 1.0 or v > h + r + 1.0:
                 continue
-            i0 = int(math.floor(u))
-            j0 = int(math.floor(v))
-            for row in range(max(j0 - r, 0), min(j0 + r + 1, h)):
+            r0, r1, c0, c1 = _window(u, v, r, w, h)
+            for row in range(r0, r1):
                 dv = row + 0.5 - v
-                for col in range(max(i0 - r, 0), min(i0 + r + 1, w)):
+                for col in range(c0, c1):
                     du = col + 0.5 - u
                     img[row, col] += amp[i] * math.exp(-0.5 * (a[i] * du * du + 2.0 * b[i] * du * dv + c[i] * dv * dv))
 

@@ -6,15 +6,14 @@ import math
 import numpy as np
 import pytest
 
+from mitpiv.imaging import PointPSFTable, point_images
 from mitpiv.replications.channel_tomo.model import (
     PAPER_TABLE_2,
     ChannelTomoSystem,
     calibrate_pose,
     camera_for_pose,
     paper_mie_factor,
-    particle_table,
     physical_mie_factor,
-    render_particles,
     to_8bit,
 )
 from mitpiv.replications.channel_tomo.study import STUDY, cost_estimate, error_decomposition, s_d
@@ -99,11 +98,11 @@ def test_physical_mie_factor_is_the_size_averaged_cross_section():
 def test_image_peak_and_8bit_noise():
     lv = 0.63
     cam = camera_for_pose(SYSTEM, 25.0, 55.0, lv, 20.0)
-    table = particle_table(SYSTEM.particle_sigma_plus / lv)
+    table = PointPSFTable.gaussian(SYSTEM.particle_sigma_plus / lv)
     # a particle on the ray through a pixel centre peaks at the exposure times its factor
     o, d = cam.pixel_to_ray(np.array(cam.principal_point_px) + 0.5)
     p = o + d * (np.linalg.norm(cam.position_mm) / np.linalg.norm(d))
-    img = render_particles([cam], [0.68], p[None, :], table, SYSTEM.peak_counts)[0]
+    img = point_images([cam], p[None, :], table, peak=SYSTEM.peak_counts, factors=[0.68])[0]
     assert img.max() == pytest.approx(0.68 * SYSTEM.peak_counts, rel=1e-6)
     # its neighbour holds the Gaussian integrated over the next pixel, written afresh (erf)
     from scipy.special import ndtr

@@ -14,8 +14,8 @@ from __future__ import annotations
 import importlib
 import sys
 
-# _sensor first: the sensor plugins subclass its variant-specific base.
-PLUGINS = ("_sensor", "laser_sheet", "mie_phase", "tracer_particles", "distorted_pinhole", "plenoptic", "particle_tracer")
+# _endpoint first: the sensor and emitter plugins subclass its variant-specific bases.
+PLUGINS = ("_endpoint", "laser_sheet", "mie_phase", "tracer_particles", "distorted_pinhole", "plenoptic", "particle_tracer")
 
 
 def register_all() -> None:

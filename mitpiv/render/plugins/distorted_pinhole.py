@@ -1,144 +1,77 @@
 """``distorted_pinhole``: pinhole camera with Brown-Conrady distortion and an optional thin lens.
 
-.. list-table::
-   :header-rows: 1
+Parameters
+----------
+to_world : transform [mm], default identity
+    Camera pose (Mitsuba convention: looks along +z, x left, y up). Rigid only.
+target, azimuth_deg, elevation_deg, distance_mm : point, float [mm, deg]
+    Alternative to ``to_world``: place the camera around ``target`` with
+    :func:`mitpiv.physics.camera.place_camera` (angles in the laser-sheet frame given
+    by ``laser_direction`` (1,0,0) and ``sheet_normal`` (0,0,1)).
+calibration : string, default none
+    A user's OpenCV calibration (``.yml``/``.yaml``/``.xml``/``.json``: camera matrix,
+    distortion, optionally rvec/tvec in mm; :func:`mitpiv.io.read_opencv_camera`)
+    instead of ``focal_length_mm``/``fov``, the principal point and ``k1``..``p2``; its
+    pose is used unless ``to_world`` or a placement is given (then the file must hold
+    none). Or a DLT or third-order polynomial table (``.csv``/``.json``, several
+    cameras; :mod:`mitpiv.io.calibration_tables`): the pose always comes from the table.
+    Relative paths resolve against the scene's folder. The film must have the
+    calibrated size; ``pixel_pitch_um`` comes from the file or the property.
+calibration_camera : string, default the sensor's id
+    DLT / polynomial table only: the camera's name (or index) in the table (default: the
+    only camera, else the one named as the sensor's ``id``).
+calibration_volume_mm : string [mm], default the table's
+    Polynomial table only: ``"x_min x_max y_min y_max z_min z_max"``, the calibration
+    volume over which a pinhole + Brown-Conrady camera is fitted to the polynomial.
+calibration_max_residual_px : float [px], default 0.1
+    Largest reprojection error accepted for the renderable approximation of a DLT (skew,
+    non-square pixels) or a polynomial (the fitted camera); beyond it loading fails.
+focal_length_mm : float [mm], default 50
+    Focal length (pinhole to image plane).
+pixel_pitch_um : float [um], default 10
+    Pixel pitch. The film's width/height give the resolution.
+fov : float [deg]
+    Alternative to ``focal_length_mm``: horizontal field of view.
+principal_point_x_px, principal_point_y_px : float [px], default image centre
+    Principal point (pixel (i, j) spans [i, i+1)).
+k1, k2, k3, p1, p2 : float, default 0
+    Brown-Conrady distortion, OpenCV convention (undistorted -> distorted).
+distortion_percent : float [%]
+    Alternative to ``k1``: radial shift at the image corner (positive = barrel).
+f_number : float, default none
+    Thin-lens aperture (f / diameter); absent = ideal pinhole.
+focus_distance_mm : float [mm]
+    In-focus distance along the optical axis (required with ``f_number``).
+focus_plane_normal : vector, default optical axis
+    Thin lens only: normal (world) of a tilted plane of focus through the axis point at
+    ``focus_distance_mm`` (Scheimpflug; see :func:`mitpiv.physics.camera.scheimpflug`).
+    The pixel mapping stays that of the untilted sensor; the importance carries the
+    Jacobian of the tilted-plane mapping, so both transport strategies agree.
+near_clip, far_clip : float [mm]; default 0.01, 1e7
+    Clip distances along the optical axis.
+psf : string, default none
+    Diffraction/aberration PSF: ``none``, ``fft`` (space invariant: oversampled render,
+    FFT convolution by :func:`mitpiv.render.render.render_sensor`; film filter
+    ``catmullrom`` (best), ``lanczos`` or ``tent``) or
+    ``jitter`` (ray offsets drawn from the PSF, may vary over the field; film filter
+    ``box``). See :class:`mitpiv.imaging.RenderPSF`. ``fft`` happens after rendering:
+    ``mi.render`` alone returns the image without it; use ``render_sensor`` or
+    ``mitpiv.render_scene``.
+psf_f_number, psf_wavelength_nm, psf_magnification : float [--, nm, --]; default f_number, 532, thin-lens M
+    Diffraction f-number (default: the thin lens'), wavelength, and the magnification
+    for the working f-number ``N (1 + |M|)`` (default ``f / (focus - f)`` for a thin
+    lens, none for a pinhole).
+psf_zernike, psf_defocus_waves, psf_spherical_waves : string, float [waves RMS]; default none
+    Wavefront: ``"noll:waves, ..."`` (e.g. ``"11:0.05, 8:0.02"``), plus shorthands for
+    Noll 4 and 11.
+psf_defocus_corner_waves : float [waves RMS], default 0
+    ``jitter`` only: field curvature, defocus growing as ``(h / h_corner)^2``.
+psf_energy_tolerance, psf_oversample, psf_table_oversample, psf_field_levels : float, int; default 1e-3, 5, 8, 16
+    Accuracy knobs: PSF window truncation; FFT render oversampling (odd); jitter table
+    cells per pixel; field heights tabulated.
 
-   * - Parameter
-     - Type
-     - Unit
-     - Default
-     - Meaning
-   * - to_world
-     - transform
-     - mm
-     - identity
-     - Camera pose (Mitsuba convention: looks along +z, x left, y up). Rigid only.
-   * - target, azimuth_deg, elevation_deg, distance_mm
-     - point, float
-     - mm, deg
-     - --
-     - Alternative to ``to_world``: place the camera around ``target`` with
-       :func:`mitpiv.physics.camera.place_camera` (angles in the laser-sheet frame given
-       by ``laser_direction`` (1,0,0) and ``sheet_normal`` (0,0,1)).
-   * - calibration
-     - string
-     - --
-     - none
-     - A user's OpenCV calibration (``.yml``/``.yaml``/``.xml``/``.json``: camera matrix,
-       distortion, optionally rvec/tvec in mm; :func:`mitpiv.io.read_opencv_camera`)
-       instead of ``focal_length_mm``/``fov``, the principal point and ``k1``..``p2``; its
-       pose is used unless ``to_world`` or a placement is given (then the file must hold
-       none). Or a DLT or third-order polynomial table (``.csv``/``.json``, several
-       cameras; :mod:`mitpiv.io.calibration_tables`): the pose always comes from the table.
-       Relative paths resolve against the scene's folder. The film must have the
-       calibrated size; ``pixel_pitch_um`` comes from the file or the property.
-   * - calibration_camera
-     - string
-     - --
-     - the sensor's id
-     - DLT / polynomial table only: the camera's name (or index) in the table (default: the
-       only camera, else the one named as the sensor's ``id``).
-   * - calibration_volume_mm
-     - string
-     - mm
-     - the table's
-     - Polynomial table only: ``"x_min x_max y_min y_max z_min z_max"``, the calibration
-       volume over which a pinhole + Brown-Conrady camera is fitted to the polynomial.
-   * - calibration_max_residual_px
-     - float
-     - px
-     - 0.1
-     - Largest reprojection error accepted for the renderable approximation of a DLT (skew,
-       non-square pixels) or a polynomial (the fitted camera); beyond it loading fails.
-   * - focal_length_mm
-     - float
-     - mm
-     - 50
-     - Focal length (pinhole to image plane).
-   * - pixel_pitch_um
-     - float
-     - um
-     - 10
-     - Pixel pitch. The film's width/height give the resolution.
-   * - fov
-     - float
-     - deg
-     - --
-     - Alternative to ``focal_length_mm``: horizontal field of view.
-   * - principal_point_x_px, principal_point_y_px
-     - float
-     - px
-     - image centre
-     - Principal point (pixel (i, j) spans [i, i+1)).
-   * - k1, k2, k3, p1, p2
-     - float
-     - --
-     - 0
-     - Brown-Conrady distortion, OpenCV convention (undistorted -> distorted).
-   * - distortion_percent
-     - float
-     - %
-     - --
-     - Alternative to ``k1``: radial shift at the image corner (positive = barrel).
-   * - f_number
-     - float
-     - --
-     - none
-     - Thin-lens aperture (f / diameter); absent = ideal pinhole.
-   * - focus_distance_mm
-     - float
-     - mm
-     - --
-     - In-focus distance along the optical axis (required with ``f_number``).
-   * - focus_plane_normal
-     - vector
-     - --
-     - optical axis
-     - Thin lens only: normal (world) of a tilted plane of focus through the axis point at
-       ``focus_distance_mm`` (Scheimpflug; see :func:`mitpiv.physics.camera.scheimpflug`).
-       The pixel mapping stays that of the untilted sensor; the importance carries the
-       Jacobian of the tilted-plane mapping, so both transport strategies agree.
-   * - near_clip, far_clip
-     - float
-     - mm
-     - 0.01, 1e7
-     - Clip distances along the optical axis.
-   * - psf
-     - string
-     - --
-     - none
-     - Diffraction/aberration PSF: ``none``, ``fft`` (space invariant: oversampled render,
-       FFT convolution by :func:`mitpiv.render.render.render_sensor`; film filter
-       ``catmullrom`` (best), ``lanczos`` or ``tent``) or
-       ``jitter`` (ray offsets drawn from the PSF, may vary over the field; film filter
-       ``box``). See :class:`mitpiv.imaging.RenderPSF`. ``fft`` happens after rendering:
-       ``mi.render`` alone returns the image without it; use ``render_sensor`` or
-       ``mitpiv.render_scene``.
-   * - psf_f_number, psf_wavelength_nm, psf_magnification
-     - float
-     - --, nm, --
-     - f_number, 532, thin-lens M
-     - Diffraction f-number (default: the thin lens'), wavelength, and the magnification
-       for the working f-number ``N (1 + |M|)`` (default ``f / (focus - f)`` for a thin
-       lens, none for a pinhole).
-   * - psf_zernike, psf_defocus_waves, psf_spherical_waves
-     - string, float
-     - waves RMS
-     - none
-     - Wavefront: ``"noll:waves, ..."`` (e.g. ``"11:0.05, 8:0.02"``), plus shorthands for
-       Noll 4 and 11.
-   * - psf_defocus_corner_waves
-     - float
-     - waves RMS
-     - 0
-     - ``jitter`` only: field curvature, defocus growing as ``(h / h_corner)^2``.
-   * - psf_energy_tolerance, psf_oversample, psf_table_oversample, psf_field_levels
-     - float, int
-     - --
-     - 1e-3, 5, 8, 16
-     - Accuracy knobs: PSF window truncation; FFT render oversampling (odd); jitter table
-       cells per pixel; field heights tabulated.
-
+Notes
+-----
 Camera tracing (``sample_ray``) maps a film sample to pixel coordinates, inverts the
 distortion (Newton's method, iteration count fixed at construction by a float64 check over
 the image) and shoots the chief ray, or, with an aperture, a ray from a uniform aperture
@@ -178,8 +111,7 @@ from mitpiv.errors import ConfigError, check_positive
 from mitpiv.imaging import RenderPSF
 from mitpiv.physics.camera import PinholeCamera
 from mitpiv.physics.distortion import Distortion, distort_jacobian, percent_to_k1, undistort
-from mitpiv.render.plugins._props import PropertyReader, read_placement
-from mitpiv.render.plugins._sensor import MitpivSensor, film_resolution
+from mitpiv.render.plugins._endpoint import MitpivSensor
 
 _VARIANT = mi.variant()
 
@@ -189,9 +121,7 @@ class DistortedPinhole(MitpivSensor):
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        rd = PropertyReader(props, "distorted_pinhole")
-        film = self.film()
-        w, h = film_resolution(self, "distorted_pinhole")
+        rd, film, (w, h) = self._open(props, "distorted_pinhole")
         self.resolution = (w, h)
 
         calibration = rd.string("calibration", None)
@@ -211,10 +141,8 @@ class DistortedPinhole(MitpivSensor):
         cy = rd.float("principal_point_y_px", h / 2.0)
 
         # Pose: to_world (read by the Mitsuba base class) or placement around a target.
-        placed = read_placement(rd, props)
-        if placed is not None:
-            self.m_to_world = mi.Transform4f(placed)
-        to_world = np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4)
+        self._place(rd, props)
+        to_world = self._to_world()
         rotation, position = PinholeCamera.rotation_from_mitsuba(to_world)
 
         k1 = rd.float("k1", None)
@@ -259,10 +187,7 @@ class DistortedPinhole(MitpivSensor):
         if clash:
             raise ConfigError(f"distorted_pinhole: 'calibration' gives the intrinsics and distortion; remove {clash}.")
         pitch = rd.float("pixel_pitch_um", None)
-        placed = read_placement(rd, props)
-        if placed is not None:
-            self.m_to_world = mi.Transform4f(placed)
-        xml_pose = placed is not None or "to_world" in props
+        xml_pose = self._place(rd, props) or "to_world" in props
         f_number = rd.float("f_number", None)
         focus = rd.float("focus_distance_mm", None)
         focus_normal = rd.vector("focus_plane_normal", None)
@@ -313,7 +238,7 @@ class DistortedPinhole(MitpivSensor):
                                      focus_distance_mm=focus, pose="forbid" if xml_pose else "optional")
         if not xml_pose:
             self.m_to_world = mi.Transform4f(cam.to_world_mitsuba())
-        to_world = np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4)
+        to_world = self._to_world()
         cam.rotation, cam.position_mm = PinholeCamera.rotation_from_mitsuba(to_world)
         psf_props = _read_psf_props(rd, f_number, focus, cam.focal_length_mm, cam.pixel_pitch_um)
         rd.finish()
@@ -323,7 +248,6 @@ class DistortedPinhole(MitpivSensor):
 
     def _finish_init(self, cam, to_world, focus_normal, psf_props, film) -> None:
         w, h = cam.resolution
-        position = cam.position_mm
         # Folding check and Newton iteration count (float64, over the whole image).
         self.newton_iterations = cam.validate_distortion()
         self.camera = cam
@@ -343,13 +267,7 @@ class DistortedPinhole(MitpivSensor):
         self._n_pix = float(w * h)
         self._r_ap = cam.aperture_radius_mm
         self._r_fold = cam.fold_radius  # normalised; inf without a fold
-        self._pos = mi.ScalarPoint3f(*position.tolist())
-        lin = np.eye(4)
-        lin[:3, :3] = to_world[:3, :3]
-        self._rot_to_world = mi.Transform4f(lin)
-        lin_inv = np.eye(4)
-        lin_inv[:3, :3] = to_world[:3, :3].T
-        self._rot_to_local = mi.Transform4f(lin_inv)
+        self._set_pose(to_world)
 
     # ------------------------------------------------------------------ helpers
     def _pixel_to_local_dir(self, u, v):

@@ -1,67 +1,33 @@
 """``laser_sheet``: a collimated laser light sheet (delta-direction emitter masked in space).
 
-.. list-table::
-   :header-rows: 1
+Parameters
+----------
+origin : point [mm]; default (0, 0, 0)
+    A point on the sheet's mid-plane (the centre of the measurement region).
+direction : vector; default (1, 0, 0)
+    Propagation direction of the laser light.
+normal : vector; default (0, 0, 1)
+    Sheet normal (thickness direction); made orthogonal to ``direction``.
+thickness : float [mm], default 1.0
+    Sheet thickness: FWHM of the profile across the sheet.
+profile : string, default gaussian
+    ``gaussian`` | ``tophat`` | ``supergaussian``.
+order : float, default 2.0
+    Super-Gaussian order: E = E0 2^(-(2|s|/t)^order).
+irradiance : float [W/mm^2], default 1.0
+    Peak irradiance on the mid-plane.
+wavelength_nm : float [nm], default 532
+    Vacuum wavelength (used by wavelength-dependent scattering such as Mie).
+width : float [mm], default unbounded
+    Optional full width of the sheet in the plane (top-hat edges, centred on
+    ``origin``, measured along ``normal x direction``).
+polarization : vector, default unpolarised
+    Optional direction of the electric field of a linearly polarised laser; must be
+    perpendicular to ``direction`` (usually in the sheet plane, ``normal x direction``).
+    Only the ``mie`` phase function of ``tracer_particles`` uses it.
 
-   * - Parameter
-     - Type
-     - Unit
-     - Default
-     - Meaning
-   * - origin
-     - point
-     - mm
-     - (0, 0, 0)
-     - A point on the sheet's mid-plane (the centre of the measurement region).
-   * - direction
-     - vector
-     - --
-     - (1, 0, 0)
-     - Propagation direction of the laser light.
-   * - normal
-     - vector
-     - --
-     - (0, 0, 1)
-     - Sheet normal (thickness direction); made orthogonal to ``direction``.
-   * - thickness
-     - float
-     - mm
-     - 1.0
-     - Sheet thickness: FWHM of the profile across the sheet.
-   * - profile
-     - string
-     - --
-     - gaussian
-     - ``gaussian`` | ``tophat`` | ``supergaussian``.
-   * - order
-     - float
-     - --
-     - 2.0
-     - Super-Gaussian order: E = E0 2^(-(2|s|/t)^order).
-   * - irradiance
-     - float
-     - W/mm^2
-     - 1.0
-     - Peak irradiance on the mid-plane.
-   * - wavelength_nm
-     - float
-     - nm
-     - 532
-     - Vacuum wavelength (used by wavelength-dependent scattering such as Mie).
-   * - width
-     - float
-     - mm
-     - unbounded
-     - Optional full width of the sheet in the plane (top-hat edges, centred on
-       ``origin``, measured along ``normal x direction``).
-   * - polarization
-     - vector
-     - --
-     - unpolarised
-     - Optional direction of the electric field of a linearly polarised laser; must be
-       perpendicular to ``direction`` (usually in the sheet plane, ``normal x direction``).
-       Only the ``mie`` phase function of ``tracer_particles`` uses it.
-
+Notes
+-----
 Ordinary surfaces are lit through Mitsuba's ``direct`` / ``path`` integrators:
 ``sample_direction`` returns the delta direction ``-direction`` weighted by the local
 irradiance ``E(p)``. Particles query :meth:`LaserSheet.irradiance` directly. The sheet
@@ -89,13 +55,17 @@ import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
 from mitpiv.physics.sheet import check_profile, drjit_ops, sheet_profile
+from mitpiv.render.plugins._endpoint import MitpivEmitter
 from mitpiv.render.plugins._props import PropertyReader
 
 _VARIANT = mi.variant()
 
 
-class LaserSheet(mi.Emitter):
+class LaserSheet(MitpivEmitter):
     """Laser light sheet; see the module docstring for parameters."""
+
+    NO_LIGHT_TRACING = ("laser_sheet: light tracing from the sheet (Mitsuba's 'ptracer') is not supported; "
+                        "use mitpiv's 'particle_tracer' or a camera-tracing integrator ('direct', 'path').")
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
@@ -172,33 +142,6 @@ class LaserSheet(mi.Emitter):
         ds.time = it.time
         active = mi.Bool(active) & (e > 0)
         return ds, dr.select(active, mi.Spectrum(e), mi.Spectrum(0.0))
-
-    def pdf_direction(self, it, ds, active=True):
-        return mi.Float(0.0)
-
-    def eval_direction(self, it, ds, active=True):
-        return mi.Spectrum(0.0)
-
-    def eval(self, si, active=True):
-        return mi.Spectrum(0.0)
-
-    def sample_ray(self, time, sample1, sample2, sample3, active=True):
-        raise ConfigError(
-            "laser_sheet: light tracing from the sheet (Mitsuba's 'ptracer') is not supported; "
-            "use mitpiv's 'particle_tracer' or a camera-tracing integrator ('direct', 'path')."
-        )
-
-    def sample_position(self, time, sample, active=True):
-        return dr.zeros(mi.PositionSample3f), mi.Float(0.0)
-
-    def pdf_position(self, ps, active=True):
-        return mi.Float(0.0)
-
-    def sample_wavelengths(self, si, sample, active=True):
-        return dr.zeros(mi.Color0f), mi.Spectrum(1.0)
-
-    def bbox(self):
-        return mi.ScalarBoundingBox3f()
 
     def to_string(self):
         return (

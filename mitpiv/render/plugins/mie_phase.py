@@ -1,63 +1,32 @@
 """``mie``: Mie phase function of spheres, tabulated at construction.
 
-.. list-table::
-   :header-rows: 1
+Parameters
+----------
+diameter_um : float [um], required outside ``tracer_particles``
+    Sphere diameter; with ``geometric_std`` the median of a log-normal distribution.
+geometric_std : float, default monodisperse
+    Geometric standard deviation (> 1) of a log-normal size distribution.
+diameters_um, weights : string [um, --]
+    A discrete size distribution: comma-separated diameters and number weights.
+index : float, default 1.45
+    Real part n of the particle index n + ik.
+index_imag : float, default 0
+    Absorption k >= 0 of the particle index n + ik.
+medium_index : float, default 1.0
+    Real index of the surrounding medium (1.333 for water).
+wavelength_nm : float [nm]; default 532, or the laser's
+    Vacuum wavelength. Nested in ``tracer_particles`` it defaults to the laser
+    sheet's and must agree with it.
+angles : integer, default 1024
+    Table resolution (nodes in the scattering angle; half of them in the forward
+    peak for large particles, see :func:`mitpiv.physics.mie.angle_grid`).
+size_step : float, default 0.02
+    Nested in ``tracer_particles`` with per-particle diameters: spacing, in size
+    parameter x, of the diameters tabulated for the per-particle lookup (linear
+    interpolation between them).
 
-   * - Parameter
-     - Type
-     - Unit
-     - Default
-     - Meaning
-   * - diameter_um
-     - float
-     - um
-     - (required outside ``tracer_particles``)
-     - Sphere diameter; with ``geometric_std`` the median of a log-normal distribution.
-   * - geometric_std
-     - float
-     - --
-     - monodisperse
-     - Geometric standard deviation (> 1) of a log-normal size distribution.
-   * - diameters_um, weights
-     - string
-     - um, --
-     - --
-     - A discrete size distribution: comma-separated diameters and number weights.
-   * - index
-     - float
-     - --
-     - 1.45
-     - Real part n of the particle index n + ik.
-   * - index_imag
-     - float
-     - --
-     - 0
-     - Absorption k >= 0 of the particle index n + ik.
-   * - medium_index
-     - float
-     - --
-     - 1.0
-     - Real index of the surrounding medium (1.333 for water).
-   * - wavelength_nm
-     - float
-     - nm
-     - 532, or the laser's
-     - Vacuum wavelength. Nested in ``tracer_particles`` it defaults to the laser
-       sheet's and must agree with it.
-   * - angles
-     - integer
-     - --
-     - 1024
-     - Table resolution (nodes in the scattering angle; half of them in the forward
-       peak for large particles, see :func:`mitpiv.physics.mie.angle_grid`).
-   * - size_step
-     - float
-     - --
-     - 0.02
-     - Nested in ``tracer_particles`` with per-particle diameters: spacing, in size
-       parameter x, of the diameters tabulated for the per-particle lookup (linear
-       interpolation between them).
-
+Notes
+-----
 The table holds ``2 pi sin(theta) p(theta)`` on a grid in the scattering angle theta and
 is interpolated linearly in theta; ``eval``, ``pdf`` and ``sample`` (inverse CDF, exact
 for the interpolant) are therefore consistent. Angles are computed as

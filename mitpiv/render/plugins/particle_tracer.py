@@ -1,27 +1,17 @@
 """``particle_tracer``: light tracing from tracer particles straight into the sensor.
 
-.. list-table::
-   :header-rows: 1
+Parameters
+----------
+rays_per_particle : integer, default 16
+    Sensor samples per particle and pass (aperture points of a thin-lens camera, PSF
+    offsets of a ``jitter`` PSF). A sensor without such samples (a pinhole) has a single
+    direction to each particle, so it always uses 1 (at the sensor's centre sample).
+occlusion : boolean, default false
+    Cast a shadow ray from each particle to the sensor (other particles' proxies and
+    any scene geometry occlude); off: all particles are seen.
 
-   * - Parameter
-     - Type
-     - Unit
-     - Default
-     - Meaning
-   * - rays_per_particle
-     - integer
-     - --
-     - 16
-     - Sensor samples per particle and pass (aperture points of a thin-lens camera, PSF
-       offsets of a ``jitter`` PSF). A sensor without such samples (a pinhole) has a single
-       direction to each particle, so it always uses 1 (at the sensor's centre sample).
-   * - occlusion
-     - boolean
-     - --
-     - false
-     - Cast a shadow ray from each particle to the sensor (other particles' proxies and
-       any scene geometry occlude); off: all particles are seen.
-
+Notes
+-----
 For each particle ``i`` and ray ``j`` the sensor's ``sample_direction`` gives the pixel
 position ``uv``, the direction ``w`` toward the sensor and the importance weight ``W``;
 the value ``I_i(w) W N_pixels / rays`` is splatted at ``uv`` with the film's

@@ -3,72 +3,42 @@
 Geometry and frames: :mod:`mitpiv.physics.plenoptic`. The film's width/height give the
 sensor resolution; use a ``box`` reconstruction filter (a pixel integrates its own area).
 
-.. list-table::
-   :header-rows: 1
+Parameters
+----------
+preset : string, default none
+    A reference camera of :data:`mitpiv.physics.plenoptic.PRESETS` (``lytro_like``,
+    ``lfpiv_hex_{800,1600}_pmr{7,14,28}``); the other parameters override it. The film
+    size must equal the preset's resolution.
+to_world / target, azimuth_deg, elevation_deg, distance_mm : transform / point, float [mm, deg]; default identity
+    Pose of the main lens (Mitsuba convention: looks along +z), as for ``distorted_pinhole``.
+focal_length_mm, f_number | aperture_diameter_mm, focus_distance_mm : float [mm, --], required
+    Main lens: focal length, aperture, object distance in focus on the MLA.
+pixel_pitch_um : float [um], required
+    Sensor pixel pitch.
+mla_pitch_um : float [um], required
+    Lenslet pitch.
+mla_focal_length_um : float [um], default f-number matched
+    Lenslet focal length (default ``p s_i / D``).
+mla_layout : string, default ``rect``
+    ``rect`` or ``hex``.
+mla_count_x, mla_count_y : integer, default fill the sensor
+    Lenslets per row and rows.
+mla_rotation_deg, mla_offset_x_um, mla_offset_y_um, mla_gap_um : float [deg, um]; default 0, 0, 0, lenslet focal length
+    Misalignment of the array and its distance to the sensor.
+k1, k2, k3 : float, default 0
+    Radial distortion of the main lens (Brown-Conrady on the object-side ray tangent;
+    :class:`mitpiv.physics.plenoptic.PlenopticCamera`, ``distortion``). The pixel weights
+    stay those of the undistorted lens (the distortion moves light; the irradiance change,
+    ``O(k1 r^2)``, is not modelled).
+crosstalk_sample_fraction : float, default 0.8
+    Camera tracing only, when neighbouring lenslets can light a pixel: the share of
+    samples sent through the pixel's own lenslet (importance sampling; unbiased for any
+    value in (0, 1)).
+far_clip : float [mm], default 1e7
+    Ray length.
 
-   * - Parameter
-     - Type
-     - Unit
-     - Default
-     - Meaning
-   * - preset
-     - string
-     - --
-     - none
-     - A reference camera of :data:`mitpiv.physics.plenoptic.PRESETS` (``lytro_like``,
-       ``lfpiv_hex_{800,1600}_pmr{7,14,28}``); the other parameters override it. The film
-       size must equal the preset's resolution.
-   * - to_world / target, azimuth_deg, elevation_deg, distance_mm
-     - transform / point, float
-     - mm, deg
-     - identity
-     - Pose of the main lens (Mitsuba convention: looks along +z), as for ``distorted_pinhole``.
-   * - focal_length_mm, f_number | aperture_diameter_mm, focus_distance_mm
-     - float
-     - mm, --
-     - required
-     - Main lens: focal length, aperture, object distance in focus on the MLA.
-   * - pixel_pitch_um
-     - float
-     - um
-     - required
-     - Sensor pixel pitch.
-   * - mla_pitch_um, mla_focal_length_um, mla_layout
-     - float, float, string
-     - um
-     - required, f-number matched, ``rect``
-     - Lenslet pitch, focal length (default ``p s_i / D``), ``rect`` or ``hex``.
-   * - mla_count_x, mla_count_y
-     - integer
-     - --
-     - fill the sensor
-     - Lenslets per row and rows.
-   * - mla_rotation_deg, mla_offset_x_um, mla_offset_y_um, mla_gap_um
-     - float
-     - deg, um
-     - 0, 0, 0, lenslet focal length
-     - Misalignment of the array and its distance to the sensor.
-   * - k1, k2, k3
-     - float
-     - --
-     - 0
-     - Radial distortion of the main lens (Brown-Conrady on the object-side ray tangent;
-       :class:`mitpiv.physics.plenoptic.PlenopticCamera`, ``distortion``). The pixel weights
-       stay those of the undistorted lens (the distortion moves light; the irradiance change,
-       ``O(k1 r^2)``, is not modelled).
-   * - crosstalk_sample_fraction
-     - float
-     - --
-     - 0.8
-     - Camera tracing only, when neighbouring lenslets can light a pixel: the share of
-       samples sent through the pixel's own lenslet (importance sampling; unbiased for any
-       value in (0, 1)).
-   * - far_clip
-     - float
-     - mm
-     - 1e7
-     - Ray length.
-
+Notes
+-----
 Camera tracing (``sample_ray``): pixel point -> a lenslet (its own, or with f-number
 mismatch a neighbour that can reach it) -> a uniform point on that lenslet's cell ->
 thin-lens refraction at the lenslet -> main-lens plane (rays outside the aperture are
@@ -104,8 +74,7 @@ from mitpiv.physics.camera import CV_TO_MITSUBA as _CV_TO_MI
 from mitpiv.physics.camera import PinholeCamera
 from mitpiv.physics.distortion import Distortion, distort, undistort
 from mitpiv.physics.plenoptic import PRESETS, PlenopticCamera
-from mitpiv.render.plugins._props import PropertyReader, read_placement
-from mitpiv.render.plugins._sensor import MitpivSensor, film_resolution
+from mitpiv.render.plugins._endpoint import MitpivSensor
 
 _VARIANT = mi.variant()
 
@@ -115,9 +84,7 @@ class Plenoptic(MitpivSensor):
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        rd = PropertyReader(props, "plenoptic")
-        film = self.film()
-        w, h = film_resolution(self, "plenoptic")
+        rd, film, (w, h) = self._open(props, "plenoptic")
         if film.rfilter().class_name() != "BoxFilter":
             raise ConfigError(
                 f"plenoptic: the film's reconstruction filter must be <rfilter type=\"box\"/> (a pixel integrates "
@@ -135,10 +102,8 @@ class Plenoptic(MitpivSensor):
                     f"film is {w}x{h}; set the film's width/height to match."
                 )
         base["resolution"] = (w, h)
-        placed = read_placement(rd, props)
-        if placed is not None:
-            self.m_to_world = mi.Transform4f(placed)
-        to_world = np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4)
+        self._place(rd, props)
+        to_world = self._to_world()
         rotation, _ = PinholeCamera.rotation_from_mitsuba(to_world)  # rigid check; float32 snapped to a rotation
         to_world[:3, :3] = rotation.T @ _CV_TO_MI
 
@@ -202,13 +167,7 @@ class Plenoptic(MitpivSensor):
         self._q_home = 1.0 if self._n_cand == 1 else q_home
         self._offsets = offs
         self._rho2 = cam.image_region_radius_mm ** 2
-        self._pos = mi.ScalarPoint3f(*to_world[:3, 3].tolist())
-        lin4 = np.eye(4)
-        lin4[:3, :3] = to_world[:3, :3]
-        self._rot_to_world = mi.Transform4f(lin4)
-        lin4i = np.eye(4)
-        lin4i[:3, :3] = to_world[:3, :3].T
-        self._rot_to_local = mi.Transform4f(lin4i)
+        self._set_pose(to_world)
         self.reset_ray_stats()
 
     # ------------------------------------------------------------------ lattice helpers

@@ -1,49 +1,27 @@
 """``tracer_particles``: light scattered by tracer particles, attached to an ``ellipsoidsmesh`` shape.
 
-.. list-table::
-   :header-rows: 1
+Parameters
+----------
+sheet : reference, default none
+    The ``laser_sheet`` emitter that lights the particles (``<ref name="sheet" id="..."/>``).
+irradiance : float [W/mm^2], default 1.0
+    Uniform irradiance when no ``sheet`` is given (incident along ``laser_direction``).
+laser_direction : vector; default (1, 0, 0)
+    Propagation direction when no ``sheet`` is given.
+scattering_efficiency : float, default 2.0
+    Q_sca: C_sca = Q_sca pi d^2 / 4 (2 is the large-particle limit). Not with the
+    ``mie`` phase, which computes C_sca.
+diameter_um : float [um], default 1.0
+    Diameter used when the shape has no per-particle ``diameter`` attribute.
+(nested phase) : phase, default isotropic
+    Angular distribution of the scattered light (any Mitsuba phase function).
+    With ``mie`` the particle radiates ``I = E dC/dOmega(d, theta)`` from Mie theory
+    (per-particle diameters interpolated in a table, see ``mie``'s ``size_step``), and
+    a polarised laser sheet gives ``E [dC_par cos^2(phi) + dC_per sin^2(phi)]``, phi
+    the angle between the polarisation and the scattering plane.
 
-   * - Parameter
-     - Type
-     - Unit
-     - Default
-     - Meaning
-   * - sheet
-     - reference
-     - --
-     - none
-     - The ``laser_sheet`` emitter that lights the particles (``<ref name="sheet" id="..."/>``).
-   * - irradiance
-     - float
-     - W/mm^2
-     - 1.0
-     - Uniform irradiance when no ``sheet`` is given (incident along ``laser_direction``).
-   * - laser_direction
-     - vector
-     - --
-     - (1, 0, 0)
-     - Propagation direction when no ``sheet`` is given.
-   * - scattering_efficiency
-     - float
-     - --
-     - 2.0
-     - Q_sca: C_sca = Q_sca pi d^2 / 4 (2 is the large-particle limit). Not with the
-       ``mie`` phase, which computes C_sca.
-   * - diameter_um
-     - float
-     - um
-     - 1.0
-     - Diameter used when the shape has no per-particle ``diameter`` attribute.
-   * - (nested phase)
-     - phase
-     - --
-     - isotropic
-     - Angular distribution of the scattered light (any Mitsuba phase function).
-       With ``mie`` the particle radiates ``I = E dC/dOmega(d, theta)`` from Mie theory
-       (per-particle diameters interpolated in a table, see ``mie``'s ``size_step``), and
-       a polarised laser sheet gives ``E [dC_par cos^2(phi) + dC_per sin^2(phi)]``, phi
-       the angle between the polarisation and the scattering plane.
-
+Notes
+-----
 Each particle radiates the intensity ``I(w) = E_sheet(c) C_sca phase(theta)`` [W/sr], with
 ``c`` its centre, ``theta`` the angle between the laser direction and ``w``. The proxy
 shell of radius ``R`` (the ellipsoid's scale times its extent; a convex polyhedron, by
@@ -79,13 +57,17 @@ import mitsuba as mi
 import numpy as np
 
 from mitpiv.errors import ConfigError, check_positive
+from mitpiv.render.plugins._endpoint import MitpivEmitter
 from mitpiv.render.plugins._props import PropertyReader
 
 _VARIANT = mi.variant()
 
 
-class TracerParticles(mi.Emitter):
+class TracerParticles(MitpivEmitter):
     """Tracer-particle emitter; see the module docstring for parameters."""
+
+    NO_LIGHT_TRACING = ("tracer_particles: Mitsuba's light tracer ('ptracer') is not supported; use "
+                        "mitpiv's 'particle_tracer' integrator for light tracing from particles.")
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
@@ -316,27 +298,6 @@ class TracerParticles(mi.Emitter):
     def sample_direction(self, it, sample, active=True):
         ds = dr.zeros(mi.DirectionSample3f)
         return ds, mi.Spectrum(0.0)
-
-    def pdf_direction(self, it, ds, active=True):
-        return mi.Float(0.0)
-
-    def eval_direction(self, it, ds, active=True):
-        return mi.Spectrum(0.0)
-
-    def sample_ray(self, time, sample1, sample2, sample3, active=True):
-        raise ConfigError(
-            "tracer_particles: Mitsuba's light tracer ('ptracer') is not supported; use "
-            "mitpiv's 'particle_tracer' integrator for light tracing from particles."
-        )
-
-    def sample_position(self, time, sample, active=True):
-        return dr.zeros(mi.PositionSample3f), mi.Float(0.0)
-
-    def pdf_position(self, ps, active=True):
-        return mi.Float(0.0)
-
-    def sample_wavelengths(self, si, sample, active=True):
-        return dr.zeros(mi.Color0f), mi.Spectrum(1.0)
 
     def bbox(self):
         shape = getattr(self, "_shape", None)

@@ -74,9 +74,10 @@ from functools import lru_cache
 import numpy as np
 
 from mitpiv.errors import ConfigError
+from mitpiv.imaging import PointPSFTable, point_images, splat_points
 
 __all__ = ["ChannelTomoSystem", "PAPER_TABLE_2", "paper_mie_factor", "physical_mie_factor", "camera_for_pose",
-           "camera_poses", "mie_factors", "particle_table", "render_particles", "to_8bit", "calibrate_pose", "evaluate_point",
+           "camera_poses", "mie_factors", "to_8bit", "calibrate_pose", "evaluate_point",
            "image_statistics"]
 
 log = logging.getLogger(__name__)
@@ -224,43 +225,6 @@ def mie_factors(poses, model: str) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------- images
-@lru_cache(maxsize=8)
-def particle_table(sigma_px: float, oversample: int = 9):
-    """:class:`mitpiv.imaging.PointPSFTable` of a Gaussian of ``sigma_px`` integrated over
-    square pixels (erf differences), window 2 ceil(3 sigma) + 1."""
-    from scipy.special import ndtr
-
-    from mitpiv.imaging import PointPSFTable
-
-    window = 2 * int(math.ceil(3 * sigma_px)) + 1
-    s = int(oversample)
-    size = (window + 1) * s + 1
-    t = (np.arange(size) - size // 2) / s  # pixel-centre offsets from the point [px]
-    g = ndtr((t + 0.5) / sigma_px) - ndtr((t - 0.5) / sigma_px)
-    fine = np.outer(g, g)
-    fine.setflags(write=False)
-    return PointPSFTable(fine=fine, oversample=s, window=window)
-
-
-def _peak_of_table(table) -> float:
-    """Peak pixel of one point centred on a pixel (its footprint normalised to 1)."""
-    _, _, v = table.footprints(np.array([[0.5, 0.5]]))
-    return float(v.max())
-
-
-def render_particles(cameras, factors, positions_mm, table, peak_counts: float) -> list[np.ndarray]:
-    """Noise-free images [counts]: every particle a splat of ``table`` scaled so that a
-    particle centred on a pixel peaks at ``peak_counts * factor`` (factor 1: the reference camera)."""
-    from mitpiv.imaging import splat_points
-
-    scale = peak_counts / _peak_of_table(table)
-    out = []
-    for cam, f in zip(cameras, factors, strict=True):
-        uv = cam.project(positions_mm)
-        out.append(splat_points(uv, cam.resolution, table, dtype=np.float64) * (scale * float(f)))
-    return out
-
-
 def to_8bit(clean, sigma_counts: float, rng, full_scale: int = 255) -> np.ndarray:
     """Add white Gaussian noise, round, clip to [0, full_scale] (an 8-bit ADC)."""
     return np.clip(np.rint(clean + rng.normal(0.0, sigma_counts, clean.shape)), 0, full_scale)
@@ -277,8 +241,8 @@ def image_statistics(system: ChannelTomoSystem, configuration: str, theta_deg: f
     fac = mie_factors(poses, mie)
     rng = np.random.default_rng(seed)
     pts = _seed(system, rng, crop_plus, phi_deg, n_i, extra_plus=0.0)
-    table = particle_table(system.particle_sigma_plus / voxel_plus)
-    imgs = render_particles(cams, fac, pts, table, system.peak_counts)
+    table = PointPSFTable.gaussian(system.particle_sigma_plus / voxel_plus)
+    imgs = point_images(cams, pts, table, peak=system.peak_counts, factors=fac)
     means, maxes = [], []
     for cam, im in zip(cams, imgs, strict=True):
         uv = cam.project(pts)
@@ -294,7 +258,6 @@ def calibrate_pose(system: ChannelTomoSystem, azimuth_deg: float, elevation_deg:
                    crop_plus: float, *, seed: int = 0) -> dict:
     """Render the multi-plane dot target for one camera pose, locate and label the dots, fit
     the polynomial mapping. Returns the mapping (``to_dict``), the camera and the fit report."""
-    from mitpiv.imaging import splat_points
     from mitpiv.reconstruct.calibration import calibrate, detect_dots, label_markers
 
     t0 = time.perf_counter()
@@ -304,13 +267,13 @@ def calibrate_pose(system: ChannelTomoSystem, azimuth_deg: float, elevation_deg:
     min_pitch = 6.0 * voxel_plus / math.sin(math.radians(abs(elevation_deg)))
     g = np.linspace(0.0, 1.0, max(3, min(system.target_lattice, int(crop_plus / min_pitch) + 1)))
     xx, yy = np.meshgrid(lo[0] + g * (hi[0] - lo[0]), lo[1] + g * (hi[1] - lo[1]))
-    table = particle_table(system.target_dot_sigma_px)
+    table = PointPSFTable.gaussian(system.target_dot_sigma_px)
     rng = np.random.default_rng(seed)
     px, world, located = [], [], []
     for z in system.target_depths_plus:
         mk = np.column_stack([xx.ravel(), yy.ravel(), np.full(xx.size, system.mm(z))])
         uv = cam.project(mk)
-        img = splat_points(uv, cam.resolution, table, dtype=np.float64) * (system.peak_counts / _peak_of_table(table))
+        img = splat_points(uv, cam.resolution, table, dtype=np.float64) * (system.peak_counts / table.peak())
         img = to_8bit(img + 0.05 * system.peak_counts, 0.01 * system.peak_counts, rng, system.full_scale)
         det = detect_dots(img, threshold=0.3 * system.peak_counts)
         mi, di = label_markers(det, uv)
@@ -338,7 +301,7 @@ def _seed(system, rng, crop_plus, phi_deg, n_i, extra_plus):
 def _reconstruct(system, maps, cams, factors, pts, table, grid, sigma, rng):
     from mitpiv.reconstruct import mart
 
-    clean = render_particles(cams, factors, pts, table, system.peak_counts)
+    clean = point_images(cams, pts, table, peak=system.peak_counts, factors=factors)
     imgs = [to_8bit(c, sigma, rng, system.full_scale) for c in clean]
     vol, info = mart(imgs, maps, grid, iterations=system.iterations, smart=True, interpolation="cubic",
                      preprocess=system.preprocess_k, smooth_px=system.image_smoothing_px, return_info=True,
@@ -378,7 +341,7 @@ def evaluate_point(system: ChannelTomoSystem, *, configuration: str, theta_deg: 
     factors = mie_factors(poses, mie)
     sigma = system.noise_fraction * system.peak_counts
     rng = np.random.default_rng(seed)
-    table = particle_table(system.particle_sigma_plus / voxel_plus)
+    table = PointPSFTable.gaussian(system.particle_sigma_plus / voxel_plus)
     lo, hi = system.box_mm(crop_plus)
     grid = VoxelGrid.from_bounds(lo, hi, system.mm(voxel_plus))
     piv = bool(windows_voxels)

@@ -375,7 +375,6 @@ def _stats_part(ctx, sc, get, rows, curves, figures, sections, system):
                 ax.legend(fontsize=7)
     fig.tight_layout()
     figures.append(ctx.figure(fig, "fig5-8_profiles_wall_units.png"))
-    plt.close(fig)
     fig, ax = plt.subplots(figsize=(5.5, 4))
     for name in STAT_KEY:
         line, = ax.semilogy(lvs, errs["avg"][name], "o-", label=f"{name} ours")
@@ -384,7 +383,6 @@ def _stats_part(ctx, sc, get, rows, curves, figures, sections, system):
     ax.set_ylabel("error vs averaged truth [%]")
     ax.legend(fontsize=7, ncol=2)
     figures.append(ctx.figure(fig, "fig10_error_vs_voxel.png"))
-    plt.close(fig)
     lines = ["| statistic | reference | " + " | ".join(f"l_v+ {lv}: paper / ours" for lv in VOXELS_PLUS) + " |",
              "|---|---|" + "---|" * len(VOXELS_PLUS)]
     for ref in ("avg", "dns"):
@@ -505,7 +503,6 @@ def _seeding_part(ctx, sc, get, rows, curves, figures, sections):
     a2.legend(fontsize=7)
     fig.tight_layout()
     figures.append(ctx.figure(fig, "fig11-12_seeding.png"))
-    plt.close(fig)
 
 
 def _camera_part(ctx, sc, get, rows, curves, figures, sections, system):
@@ -607,7 +604,6 @@ def _camera_part(ctx, sc, get, rows, curves, figures, sections, system):
         fig.colorbar(im, ax=ax)
     fig.tight_layout()
     figures.append(ctx.figure(fig, "fig14-22_Q_maps.png"))
-    plt.close(fig)
     fig, ax = plt.subplots(figsize=(5.5, 4))
     for mie, ls in (("paper", "-"), ("physical", "--")):
         f, b = fb[mie]
@@ -617,7 +613,6 @@ def _camera_part(ctx, sc, get, rows, curves, figures, sections, system):
     ax.set_ylabel("Q at phi = 55 deg")
     ax.legend(fontsize=7)
     figures.append(ctx.figure(fig, "fig20_forward_backward.png"))
-    plt.close(fig)
 
 
 def _table2_part(ctx, sc, rows, curves, sections, system):

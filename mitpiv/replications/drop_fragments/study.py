@@ -1140,7 +1140,6 @@ def _figures(ctx, stats, conds, ref, laws, curves, *, dih_md, dih_ed, pd_all, pe
     ax.legend(fontsize=7)
     fig.tight_layout()
     out.append(ctx.figure(fig, "fig24_size_histogram.png"))
-    plt.close(fig)
 
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.8))
     me = ref["me"]
@@ -1157,7 +1156,6 @@ def _figures(ctx, stats, conds, ref, laws, curves, *, dih_md, dih_ed, pd_all, pe
     axes[0].set_title("Fig. 25: displacements, We 784, tau 5.1 (paper: x 0.263, z 0.411 mm)", fontsize=9)
     fig.tight_layout()
     out.append(ctx.figure(fig, "fig25_displacements.png"))
-    plt.close(fig)
 
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.8))
     dax = np.linspace(0.03, 0.6, 60)
@@ -1185,7 +1183,6 @@ def _figures(ctx, stats, conds, ref, laws, curves, *, dih_md, dih_ed, pd_all, pe
     ax.legend(fontsize=7)
     fig.tight_layout()
     out.append(ctx.figure(fig, "fig26-27_depth_uncertainty.png"))
-    plt.close(fig)
 
     fig, axes = plt.subplots(1, 4, figsize=(14, 3.6))
     for we, col in zip((624, 784, 1051), ("C0", "C1", "C2"), strict=True):
@@ -1212,7 +1209,6 @@ def _figures(ctx, stats, conds, ref, laws, curves, *, dih_md, dih_ed, pd_all, pe
     axes[1].legend(fontsize=6)
     fig.tight_layout()
     out.append(ctx.figure(fig, "fig28-29_vs_tau.png"))
-    plt.close(fig)
     return out
 
 

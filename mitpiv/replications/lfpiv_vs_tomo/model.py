@@ -330,10 +330,10 @@ def to_8bit(images) -> list[np.ndarray]:
 def render_tomo(cams, points_mm) -> list[np.ndarray]:
     """Tomographic images (H, W) float64: pixel-integrated Gaussians of e^-2 diameter 3 px,
     a particle centred on a pixel peaking at 255 (overlaps add)."""
-    from mitpiv.replications.channel_tomo.model import particle_table, render_particles
+    from mitpiv.imaging import PointPSFTable, point_images
 
-    table = particle_table(TOMO["particle_diameter_px"] / 4.0)
-    return render_particles(cams, np.ones(len(cams)), np.asarray(points_mm, dtype=float), table, 255.0)
+    table = PointPSFTable.gaussian(TOMO["particle_diameter_px"] / 4.0)
+    return point_images(cams, np.asarray(points_mm, dtype=float), table, peak=255.0, factors=np.ones(len(cams)))
 
 
 # ---------------------------------------------------------------------- metrics

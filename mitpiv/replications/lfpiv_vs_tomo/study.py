@@ -831,9 +831,7 @@ def run(ctx) -> ReplicationResult:
     # --- Fig. 8: RMS velocity (displacement) errors, in voxels of each reconstruction
     piv = {k: r["piv"] for k, r in R.items()}
     for cam in CAMERAS:
-        curves[f"fig8a_lf_rms_vox_{cam}"] = Curve(list(PMRS), {c: [piv[("lf", cam, p)]["rms_vox"][i] for p in PMRS]
-                                                               for i, c in enumerate("uvw")}, "PMR",
-                                                  "RMS displacement error [voxels]")
+        curves[f"fig8a_lf_rms_vox_{cam}"] = _uvw_curve(piv, ("lf", cam), "RMS displacement error [voxels]")
         for pmr in PMRS:
             for i, c in enumerate("uvw"):
                 ours = piv[("lf", cam, pmr)]["rms_vox"][i]
@@ -846,9 +844,7 @@ def run(ctx) -> ReplicationResult:
                     rows.append(Row(rid, f"LF-PIV {c} RMS error, PMR {pmr}, {cam} LTPR", "Fig. 8a",
                                     "plotted (no number in the text)", _num(ours), unit="voxel"))
     for ppp in PPPS:
-        curves[f"fig8b_tomo_rms_vox_ppp{ppp:g}"] = Curve(list(NCS), {c: [piv[("tomo", n, ppp)]["rms_vox"][i]
-                                                                         for n in NCS] for i, c in enumerate("uvw")},
-                                                         "N_c", "RMS displacement error [voxels]")
+        curves[f"fig8b_tomo_rms_vox_ppp{ppp:g}"] = _uvw_curve(piv, ("tomo", ppp), "RMS displacement error [voxels]")
         for nc in NCS:
             ours = _rms3(piv[("tomo", nc, ppp)]["rms_vox"])
             rows.append(Row(f"tomo_rms_px_nc{nc}_ppp{ppp:g}", f"Tomo-PIV RMS error (u, v, w pooled), {nc} cameras, "
@@ -856,13 +852,10 @@ def run(ctx) -> ReplicationResult:
                             note="u / v / w " + " / ".join(f"{v:.3f}" for v in piv[("tomo", nc, ppp)]["rms_vox"])))
     ideal = {k: r["piv_ideal"] for k, r in R.items()}
     for cam in CAMERAS:
-        curves[f"ideal_lf_rms_vox_{cam}"] = Curve(list(PMRS), {c: [ideal[("lf", cam, p)]["rms_vox"][i] for p in PMRS]
-                                                               for i, c in enumerate("uvw")}, "PMR",
-                                                  "RMS error of PIV on ideal volumes [voxels]")
+        curves[f"ideal_lf_rms_vox_{cam}"] = _uvw_curve(ideal, ("lf", cam), "RMS error of PIV on ideal volumes [voxels]")
     for ppp in PPPS:
-        curves[f"ideal_tomo_rms_vox_ppp{ppp:g}"] = Curve(list(NCS), {c: [ideal[("tomo", n, ppp)]["rms_vox"][i]
-                                                                         for n in NCS] for i, c in enumerate("uvw")},
-                                                         "N_c", "RMS error of PIV on ideal volumes [voxels]")
+        curves[f"ideal_tomo_rms_vox_ppp{ppp:g}"] = _uvw_curve(ideal, ("tomo", ppp),
+                                                              "RMS error of PIV on ideal volumes [voxels]")
     t4 = [_rms3(piv[("tomo", n, 0.05)]["rms_vox"]) for n in NCS]
     rows.append(compare_trend("tomo_rms_falls_with_nc", "Tomo-PIV RMS error at N_c 4 / 6 / 8, 0.05 ppp [voxels]",
                               "Fig. 8b", "falls with N_c", " / ".join(f"{v:.3f}" for v in t4), t4[2] <= t4[0],
@@ -943,25 +936,21 @@ def run(ctx) -> ReplicationResult:
         return r["reconstruct_s_per_frame"] * f
 
     base = full_time(("tomo", 4, 0.05))
+    # (result key, Table 3 key, row id, what, curve label): the light-field cases, then Tomo-PIV's
+    cases = [(("lf", cam, pmr), ("lf", pmr, cam), f"time_ratio_lf_pmr{pmr}_{cam}",
+              f"LF-PIV reconstruction time / 4-camera Tomo-PIV, PMR {pmr}, {cam} LTPR", f"LF {pmr} {cam}")
+             for cam in CAMERAS for pmr in PMRS]
+    cases += [(("tomo", nc, ppp), ("tomo", nc, ppp), f"time_ratio_tomo_nc{nc}_ppp{ppp:g}",
+               f"Tomo-PIV reconstruction time / 4-camera, {nc} cameras, {ppp:g} ppp", f"Tomo {nc} {ppp:g}")
+              for nc in NCS for ppp in PPPS]
     tr_x, tr_ours, tr_paper = [], [], []
-    for cam in CAMERAS:
-        for pmr in PMRS:
-            ours = full_time(("lf", cam, pmr)) / base
-            paper = PAPER_TABLE_3[("lf", pmr, cam)]
-            rows.append(_time_row(f"time_ratio_lf_pmr{pmr}_{cam}", f"LF-PIV reconstruction time / 4-camera Tomo-PIV, "
-                                  f"PMR {pmr}, {cam} LTPR", paper, ours))
-            tr_x.append(f"LF {pmr} {cam}")
-            tr_ours.append(ours)
-            tr_paper.append(paper)
-    for nc in NCS:
-        for ppp in PPPS:
-            ours = full_time(("tomo", nc, ppp)) / base
-            paper = PAPER_TABLE_3[("tomo", nc, ppp)]
-            rows.append(_time_row(f"time_ratio_tomo_nc{nc}_ppp{ppp:g}", f"Tomo-PIV reconstruction time / 4-camera, "
-                                  f"{nc} cameras, {ppp:g} ppp", paper, ours))
-            tr_x.append(f"Tomo {nc} {ppp:g}")
-            tr_ours.append(ours)
-            tr_paper.append(paper)
+    for key, paper_key, rid, what, label in cases:
+        ours = full_time(key) / base
+        paper = PAPER_TABLE_3[paper_key]
+        rows.append(_time_row(rid, what, paper, ours))
+        tr_x.append(label)
+        tr_ours.append(ours)
+        tr_paper.append(paper)
     curves["table3_time_ratio"] = Curve(tr_x, {"ours": tr_ours}, "case", "time / 4-camera Tomo-PIV",
                                         paper={"paper": tr_paper})
     lf_order = [full_time(("lf", "low", p)) for p in PMRS]
@@ -1008,7 +997,6 @@ def run(ctx) -> ReplicationResult:
     axes[2].legend(fontsize=7)
     fig.tight_layout()
     figures.append(ctx.figure(fig, "fig8_table3.png"))
-    plt.close(fig)
     fig, ax = plt.subplots(figsize=(5, 3.5))
     ax.loglog(conv["rays"], conv["rel_l2"], "o-", label="stratified vs Monte Carlo")
     ax.axhline(conv["reference_noise"], color="k", ls=":", label="Monte Carlo noise")
@@ -1017,7 +1005,6 @@ def run(ctx) -> ReplicationResult:
     ax.legend(fontsize=7)
     fig.tight_layout()
     figures.append(ctx.figure(fig, "lf_image_convergence.png"))
-    plt.close(fig)
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
     for k, comp in enumerate("uvw"):
         for i in its:
@@ -1036,7 +1023,6 @@ def run(ctx) -> ReplicationResult:
     fig.suptitle("LF-PIV, low LTPR, PMR 14: PIV error by depth and DRT-MART iterations")
     fig.tight_layout()
     figures.append(ctx.figure(fig, "lf_error_by_depth.png"))
-    plt.close(fig)
 
     est_full, est_quick = cost_estimate(False), cost_estimate(True)
     # --- the experiment replica (section 3, Table 4)
@@ -1080,7 +1066,6 @@ def run(ctx) -> ReplicationResult:
                  "Table 4 windows): seeding, turbulence, passes")
     fig.tight_layout()
     figures.append(ctx.figure(fig, "experiment_ideal_factors.png"))
-    plt.close(fig)
     c = E["lf_vs_tomo"]
     if c.get("sample_a"):
         a, b = np.asarray(c["sample_a"]), np.asarray(c["sample_b"])
@@ -1094,7 +1079,6 @@ def run(ctx) -> ReplicationResult:
         fig.suptitle(f"Experiment replica: LF-PIV vs Tomo-PIV where they overlap (r = {c['r']:.3f}, paper 0.94)")
         fig.tight_layout()
         figures.append(ctx.figure(fig, "experiment_lf_vs_tomo.png"))
-        plt.close(fig)
     replica = "\n\n".join([_experiment_section(E, ctx.quick), _ideal_section(E, ideal, motion), _variant_section(V, V_ideal)])
     sections = [_method(sc, R, conv, est_full, est_quick, ctx), _error_table(R), replica,
                 _disagreements(ctx, R, depth, E)]
@@ -1117,6 +1101,16 @@ LF_CAMERAS_MLA = _mla()
 
 def _num(v):
     return None if v is None or not math.isfinite(float(v)) else float(v)
+
+
+def _uvw_curve(res, arm, ylabel: str) -> Curve:
+    """The u, v, w RMS errors [voxels] (``res[key]["rms_vox"]``) of one arm along its sweep:
+    ``("lf", cam)`` over the PMRs, ``("tomo", ppp)`` over the camera counts."""
+    if arm[0] == "lf":
+        xs, key, xlabel = PMRS, lambda pmr: ("lf", arm[1], pmr), "PMR"
+    else:
+        xs, key, xlabel = NCS, lambda nc: ("tomo", nc, arm[1]), "N_c"
+    return Curve(list(xs), {c: [res[key(x)]["rms_vox"][i] for x in xs] for i, c in enumerate("uvw")}, xlabel, ylabel)
 
 
 def _time_row(rid, quantity, paper, ours, *, source: str = "Table 3",

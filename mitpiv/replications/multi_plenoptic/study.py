@@ -393,7 +393,6 @@ def run(ctx) -> ReplicationResult:
         ax.set_title(key, fontsize=9)
         ax.legend(fontsize=7)
         figures.append(ctx.figure(fig, f"{key}.png"))
-        plt.close(fig)
     # ---------------------------------------------------------------- sections
     cam_cpu = [r["cpu_s"] for r in cams]
     cfg_cpu = [r["cpu_s"] for r in res]

@@ -450,7 +450,6 @@ def run(ctx) -> ReplicationResult:
         else:
             ax.legend(fontsize=7)
         figures.append(ctx.figure(fig, fname))
-        plt.close(fig)
     # ------------------------------------------------------------------ sections
     cr = cal[_ckey(2.0, 0.0, "none")]["report"]
     ref = 12
