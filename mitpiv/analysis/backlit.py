@@ -75,7 +75,7 @@ class Dewarp:
         return _poly_terms(uvz, self.degree_xy, self.degree_z, self.centre, self.scale) @ self.coef
 
     def mm_per_px(self, uvz) -> np.ndarray:
-        """Local in-plane scale sqrt(|det d(x, y)/d(u, v)|) [mm per px] (central differences)."""
+        """Local in-plane scale ``sqrt(|det d(x, y)/d(u, v)|)`` [mm per px] (central differences)."""
         p = np.atleast_2d(np.asarray(uvz, dtype=np.float64))
         h = 0.5
         du = (self(p + [h, 0, 0]) - self(p - [h, 0, 0]))[:, :2] / (2 * h)
@@ -232,6 +232,8 @@ def hybrid_detect(stack, z_mm, *, background=None, threshold: float = 0.5, min_a
                   dewarp: Dewarp | None = None, pixel_to_stack=None) -> BacklitDetections:
     """Detect, locate and size backlit particles in a focal stack (see the module notes).
 
+    Parameters
+    ----------
     stack : (n_z, H, W) refocused intensities; z_mm : (n_z,) their depths (monotonic).
     background : the same stack of the empty (white) scene, or a scalar; pixels it leaves
         at 0 (no views) count as background. Default: the stack's median.
@@ -243,6 +245,8 @@ def hybrid_detect(stack, z_mm, *, background=None, threshold: float = 0.5, min_a
     dewarp, pixel_to_stack : a :class:`Dewarp` for world positions and diameters, and the
         map from stack indices to the pixel coordinates it was fitted in.
 
+    Notes
+    -----
     Steps: the minimum-intensity map is segmented (regions whose centroid falls outside
     them, the annular dark fringes of defocused planes, are dropped); each region's
     centroid seeds, in every plane, the connected dark silhouette holding it; the depth is
@@ -372,11 +376,16 @@ def match_frames(a: BacklitDetections, b: BacklitDetections, *, dt_s: float, rad
                  predictor_mm=None, axis=None) -> dict:
     """Nearest-neighbour (optimal one-to-one) matching of world positions between two frames.
 
+    Parameters
+    ----------
     predictor_mm : expected displacement (3,) or (N_a, 3) added to frame a before matching.
     axis : a viewing direction (3,): match within ``radius_mm`` in the plane normal to it,
         leaving the depth free (the uncertain coordinate of a single-view technique, whose
         error would otherwise break pairs: DIH depth errors reach several mm); None matches
         in 3D.
+
+    Notes
+    -----
     Returns ``pairs`` (K, 2), ``velocity_mm_s`` (K, 3, depth included) and the matched
     positions of a.
     """

@@ -163,7 +163,7 @@ class PlenopticCamera:
     mla_count : (int, int), optional
         Lenslets per row and rows; default: as many as fit on the sensor.
     mla_rotation_deg : float
-        Rotation of the array relative to the pixel grid (|angle| <= 30 deg).
+        Rotation of the array relative to the pixel grid (``|angle| <= 30 deg``).
     mla_offset_um : (float, float)
         Shift of the array centre from the sensor centre (sensor frame).
     mla_gap_um : float, optional
@@ -808,7 +808,9 @@ _dof_limits = dof_limits_geom  # deprecated private name
 
 def ltpr(lf_resolution_px, tomo_resolution_px, n_cameras: int) -> float:
     """Light-field-camera to tomographic-cameras pixel ratio (Shi et al., 'A detailed comparison
-    of single-camera light-field PIV and tomographic PIV', section 2)::
+    of single-camera light-field PIV and tomographic PIV', section 2):
+
+    ::
 
         LTPR = (p_x p_y)_LF-PIV / (p_x p_y N_c)_Tomo-PIV
 

@@ -5,9 +5,9 @@
 mid-plane and 1/2 at ``|s| = thickness/2``:
 
 - ``gaussian``:       exp(-4 ln2 s^2 / t^2)
-- ``supergaussian``:  2^(-(2|s|/t)^order)  (order 2 is the Gaussian; large orders tend to
+- ``supergaussian``:  ``2^(-(2|s|/t)^order)``  (order 2 is the Gaussian; large orders tend to
   the top hat)
-- ``tophat``:         1 for |s| <= t/2, else 0  (edge value 1/2 at exactly |s| = t/2 is
+- ``tophat``:         1 for ``|s| <= t/2``, else 0  (edge value 1/2 at exactly ``|s| = t/2`` is
   not represented; the FWHM is t).
 
 The functions take an array namespace ``xp`` (``numpy`` or :data:`DRJIT_OPS`) so the same

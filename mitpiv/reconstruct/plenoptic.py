@@ -181,7 +181,9 @@ def paper_refocus(lf: LightField, grid: VoxelGrid, *, equation: int, weights=Non
 
 
 def fuse(volumes, *, normalise: str = "histogram", gamma_m: float | None = None) -> np.ndarray:
-    """Fuse the volumes of several (plenoptic) cameras on one grid (Fahringer & Thurow, eq. 15)::
+    """Fuse the volumes of several (plenoptic) cameras on one grid (Fahringer & Thurow, eq. 15):
+
+    ::
 
         V_c(x, y, z) = prod_{i=1}^{M} V_i'(x, y, z)^gamma_M,    gamma_M = 1 / M
 

@@ -105,6 +105,8 @@ def noise_normal_fit(values, *, bins: int = 256, iterations: int = 20) -> tuple[
 class RefocusResult:
     """Refocused planes and their histogram statistics.
 
+    Attributes
+    ----------
     planes : (n_z, n_points) float32, thresholded (or raw with ``threshold_k=None``).
     mu, sigma : (n_z,) normal fit of each raw plane's noise histogram.
     peak : (n_z,) maximum of each raw plane.

@@ -49,13 +49,20 @@ RENDER_PACKAGES = ("mitsuba", "drjit")
 class Stage:
     """One stage of an experiment kind.
 
-    name : the stage folder's name.
-    reads : the experiment's top-level keys (tables) whose values reach this stage.
-    run : ``run(ctx) -> dict``: fills ``ctx.out`` and returns a JSON-ready result.
-    files : ``files(cfg) -> list of paths``: the files outside the run folder that the stage
+    Attributes
+    ----------
+    name : str
+        The stage folder's name.
+    reads : tuple of str
+        The experiment's top-level keys (tables) whose values reach this stage.
+    run : callable
+        ``run(ctx) -> dict``: fills ``ctx.out`` and returns a JSON-ready result.
+    files : callable or None
+        ``files(cfg) -> list of paths``: the files outside the run folder that the stage
         reads (their content is part of its key); None: none.
-    packages : installed packages whose version shapes the stage's output (part of its key),
-        e.g. :data:`RENDER_PACKAGES` for a stage that renders.
+    packages : tuple of str
+        Installed packages whose version shapes the stage's output (part of its key), e.g.
+        :data:`RENDER_PACKAGES` for a stage that renders.
     """
 
     name: str

@@ -3,7 +3,7 @@ Sciacchitano, Schroeder et al.): yield, ghosts, position, velocity and accelerat
 errors, track lengths and correct tracks, and binning of tracks onto an Eulerian grid.
 
 Definitions (stated here because the Challenge's exact match radius is a parameter)
----------------------------------------------------------------------------------
+-----------------------------------------------------------------------------------
 - Matching: per frame, reconstructed particles are paired one-to-one with true particles
   within ``radius_mm`` by a minimum-total-distance assignment
   (:func:`mitpiv.analysis.particles.assign`). Only true particles inside the box
@@ -12,7 +12,7 @@ Definitions (stated here because the Challenge's exact match radius is a paramet
 - ``ghost_fraction``: unmatched reconstructed / reconstructed particles.
 - ``position_error_mm``: mean Euclidean distance of matched pairs; ``position_error_px``:
   the same distance projected, averaged over the cameras (``|P_c(found) - P_c(true)|``).
-- ``velocity_error``: mean |v - v_true| of matched track samples [mm/s], and divided by
+- ``velocity_error``: mean ``|v - v_true|`` of matched track samples [mm/s], and divided by
   the RMS true speed (``velocity_error_rel``); the same for acceleration.
 - A track is ``correct`` when all its samples (inside the box) match one and the same
   true particle.
