@@ -19,34 +19,14 @@ def _unit(module: str) -> str:
     return parts[1] if len(parts) > 1 else "mitpiv"
 
 
-def _imports(tree: ast.AST):
-    """Imported module names, skipping ``if TYPE_CHECKING:`` bodies."""
-    stack = [tree]
-    while stack:
-        node = stack.pop()
-        if isinstance(node, ast.If) and isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING":
-            stack.extend(node.orelse)
-            continue
-        if isinstance(node, ast.Import):
-            yield from (a.name for a in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            if node.module == "mitpiv":
-                yield from (f"mitpiv.{a.name}" for a in node.names)
-            else:
-                yield node.module
-        stack.extend(ast.iter_child_nodes(node))
-
-
 def package_graph() -> dict[str, set[str]]:
+    """The subpackage graph: the module graph of :mod:`mitpiv` (:func:`module_graph`) with
+    every module folded into its subpackage (``mitpiv.render.plugins.x`` -> ``render``)."""
     edges: dict[str, set[str]] = {}
-    for f in ROOT.rglob("*.py"):
-        module = ".".join(f.relative_to(ROOT.parent).with_suffix("").parts).removesuffix(".__init__")
-        src = _unit(module)
-        for name in _imports(ast.parse(f.read_text())):
-            if name == "mitpiv" or name.startswith("mitpiv."):
-                dst = _unit(name)
-                if dst != src:
-                    edges.setdefault(src, set()).add(dst)
+    for src, dsts in module_graph("mitpiv").items():
+        for dst in dsts:
+            if _unit(dst) != _unit(src):
+                edges.setdefault(_unit(src), set()).add(_unit(dst))
     return edges
 
 
