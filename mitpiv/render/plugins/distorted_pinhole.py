@@ -77,8 +77,17 @@ distortion (Newton's method, iteration count fixed at construction by a float64 
 the image) and shoots the chief ray, or, with an aperture, a ray from a uniform aperture
 point through the chief ray's point on the focus plane. Particle tracing
 (``sample_direction``) runs the forward model: point -> (aperture point ->) focus plane ->
-normalised coordinates -> distortion -> pixel, with the importance
-``f_px^2 |det J_distortion| / (N_pixels cos^3 theta)``. A distortion that folds over inside
+normalised coordinates -> distortion -> pixel, with the importance weight
+``W = f_px^2 |det J_distortion| / (N_pixels cos^3(theta) |p - a|^2)`` [mm^-2], where
+``p - a`` runs from the aperture point ``a`` (the pinhole itself without a lens) to the
+point, ``|p - a|`` is its length [mm] and ``theta`` its angle to the optical axis (a tilted
+plane of focus multiplies ``W`` by that mapping's Jacobian too). That is
+``W = 1 / (N_pixels Omega_pix |p - a|^2)`` with ``Omega_pix = cos^3(theta) / (f_px^2
+|det J_distortion|)`` the solid angle [sr] of the pixel the point lands on; the particle
+tracer multiplies it by the particle's intensity [W/sr] and by ``N_pixels``, so a particle
+adds ``I / (|p - a|^2 Omega_pix)`` [W mm^-2 sr^-1] to the image (averaged over the aperture
+points): radiance averaged over the pixel footprint, the quantity camera tracing estimates
+(the absolute formula: ``docs/radiometry.md``). A distortion that folds over inside
 the image is rejected at construction. A strong barrel distortion that folds back *outside*
 the image (beyond the undistorted radius :func:`~mitpiv.physics.distortion.fold_radius`)
 would map points far outside the field of view onto the image: particle tracing leaves

@@ -44,7 +44,12 @@ mismatch a neighbour that can reach it) -> a uniform point on that lenslet's cel
 thin-lens refraction at the lenslet -> main-lens plane (rays outside the aperture are
 vignetted: weight zero, counted in :meth:`Plenoptic.ray_stats`) -> refraction -> scene.
 Particle tracing (``sample_direction``): scene point -> uniform main-lens aperture point ->
-refraction -> MLA plane (the lenslet whose cell it hits) -> refraction -> sensor pixel.
+refraction -> MLA plane (the lenslet whose cell it hits) -> refraction -> sensor pixel,
+with the importance weight ``W = pi R_ap^2 cos(theta_a) / (|p - a|^2 p_pix^2 N_pixels)``
+[sr mm^-2]: ``|p - a|`` [mm] the distance from the point to the aperture point ``a``,
+``theta_a`` its angle to the optical axis, ``R_ap`` the aperture radius and ``p_pix`` the
+pixel pitch [mm]; averaged over ``a`` it is the aperture's solid angle seen from the point
+divided by the pixel area (and ``N_pixels``, which the particle tracer multiplies back).
 Refraction is the ideal thin lens, exact in ray tangents. Pixel values are sensor
 irradiance [W/mm^2] averaged over the pixel, with the power entering the aperture from
 the scene conserved: a point source of intensity I on the axis at distance z puts
