@@ -290,6 +290,7 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
                 t0 = time.perf_counter()
                 arr = render_sensor(sc, sensor, spp=spp or 0, seed=rseed)
                 dt = time.perf_counter() - t0
+                camera = sensor_model(sensor)  # a plenoptic camera records irradiance, the others radiance
                 meta = {
                     "mitpiv_version": __version__,
                     "mitsuba_version": mi.__version__,
@@ -304,12 +305,12 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
                     "spp_requested": spp,
                     "integrator": _integrator_info(sc),
                     "sensor_id": sid,
-                    "camera": sensor_model(sensor),
+                    "camera": camera,
                     "illumination": laser,
                     "particles": particles,
                     "frame": f,
                     "time_s": None if times is None or f >= len(times) else float(times[f]),
-                    "units": {"length": "mm", "pixel_value": PIXEL_UNITS},
+                    "units": {"length": "mm", "pixel_value": camera.get("pixel_value", PIXEL_UNITS)},
                     "truth_file": truth,
                     "render_seconds": dt,
                 }

@@ -154,3 +154,32 @@ def test_cli_sensor_writes_integer_images(xml, tmp_path, capsys):
     assert main(["sensor", str(exr), "--out", str(bad), "--bit-depth", "9"]) == 2
     assert "bit_depth" in capsys.readouterr().err
     assert not bad.exists()
+
+
+def test_the_metadata_says_what_a_pixel_value_is_per_camera(xml, tmp_path):
+    """A pinhole records radiance averaged over the pixel; a plenoptic camera records sensor
+    irradiance (its own model says so): the EXR's units follow the camera, not one string."""
+    from mitpiv.render.render import PIXEL_UNITS
+
+    plen = particle_scene_xml("""    <sensor type="plenoptic" id="plen">
+        <float name="pixel_pitch_um" value="5.5"/>
+        <float name="focal_length_mm" value="50"/>
+        <float name="f_number" value="2.8"/>
+        <float name="focus_distance_mm" value="250"/>
+        <float name="mla_pitch_um" value="55"/>
+        <transform name="to_world"><lookat origin="0, 0, 250" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm">
+            <integer name="width" value="40"/>
+            <integer name="height" value="40"/>
+            <string name="pixel_format" value="luminance"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+""", laser='<float name="thickness" value="3"/>')
+    (xml.parent / "plen.xml").write_text(plen)
+    _, meta_pin = read_exr(mitpiv.render_scene(xml, out_dir=tmp_path / "a", frames=(0,), progress=False)[0])
+    _, meta_plen = read_exr(mitpiv.render_scene(xml.parent / "plen.xml", out_dir=tmp_path / "b", frames=(0,),
+                                                progress=False)[0])
+    assert meta_pin["units"]["pixel_value"] == PIXEL_UNITS and "radiance" in PIXEL_UNITS
+    assert meta_plen["units"]["pixel_value"] == meta_plen["camera"]["pixel_value"]
+    assert meta_plen["units"]["pixel_value"].startswith("sensor irradiance [W/mm^2]")
