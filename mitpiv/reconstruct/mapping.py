@@ -198,7 +198,10 @@ class PolynomialMapping(CameraMapping):
             raise ConfigError(f"PolynomialMapping: 'terms' must be Soloff's 19 {list(SOLOFF_TERMS)} or the 20 of the "
                               f"full cubic (those and z^3), got {list(terms)}.")
         self.terms = terms
-        self.coefficients = np.asarray(coefficients, dtype=float).reshape(2, len(terms))
+        # C order whatever the source (a least-squares fit hands back a Fortran-ordered array):
+        # BLAS picks its kernel, hence its summation order, by memory layout, so a mapping read
+        # back from JSON must hold the same layout to project bit for bit as the fitted one
+        self.coefficients = np.ascontiguousarray(np.asarray(coefficients, dtype=float).reshape(2, len(terms)))
         self.centre_mm = np.asarray(centre_mm, dtype=float).reshape(3)
         self.scale_mm = np.asarray(scale_mm, dtype=float).reshape(3)
         self.resolution = None if resolution is None else tuple(int(v) for v in resolution)
