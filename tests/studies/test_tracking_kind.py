@@ -160,16 +160,35 @@ def score(tracks, seq):
                          truth_velocities_mm_s=np.transpose(seq.velocities_mm_s, (1, 0, 2)), lower_mm=LO, upper_mm=HI)
 
 
+#: A camera dropping one frame, pooled over three particle fields of 30 (90 particles): the
+#: frame then rests on three cameras. Measured over ten fields (seeds 2-11): its yield 0.87-1.00
+#: (mean 0.94), its ghost fraction 0-0.071 (mean 0.027), the whole track's yield 0.88-0.98 and
+#: velocity error 0.4-1.6 %. One field alone moves by a particle (3.3 %) with the CPU's rounding,
+#: so the bounds are on the pool (mean yield, mean ghost fraction) and sit about ten particles from
+#: the measured means; a frame lost with its camera (yield ~0) fails them.
+DROPPED_FRAME_MIN_YIELD = 0.8
+DROPPED_FRAME_MAX_GHOSTS = 0.12
+DROPPED_TRACK_MIN_YIELD = 0.85
+
+
 def test_a_camera_that_sees_no_particle_in_one_frame():
-    seq, images, cams, otf = synthetic(6, count=30)
-    images[4][2] = np.zeros_like(images[4][2])  # camera 2 dropped frame 4
-    tr = track_images(images, cams, otf, dt_s=0.005, lower_mm=LO, upper_mm=HI, tracking=TrackingTable(
-        velocity_guess_mm_s=(40.0, 0.0, 0.0), search_px=3.0))
-    m = score(tr, seq)
-    assert np.isfinite(tr.positions_mm[tr.present]).all()
-    # the three other cameras carry frame 4: its particles are still found
-    assert m["per_frame"][4]["yield"] > 0.9 and m["per_frame"][4]["ghost_fraction"] < 0.05
-    assert m["yield"] > 0.9 and m["velocity_error_rel"] < 0.05
+    found = ghosts = 0.0
+    yields, errors = [], []
+    for seed in (2, 3, 4):  # seed 3 is the hardest of the ten measured
+        seq, images, cams, otf = synthetic(6, count=30, seed=seed)
+        images[4][2] = np.zeros_like(images[4][2])  # camera 2 dropped frame 4
+        tr = track_images(images, cams, otf, dt_s=0.005, lower_mm=LO, upper_mm=HI, tracking=TrackingTable(
+            velocity_guess_mm_s=(40.0, 0.0, 0.0), search_px=3.0))
+        m = score(tr, seq)
+        assert np.isfinite(tr.positions_mm[tr.present]).all()
+        f4 = m["per_frame"][4]
+        found += f4["yield"] * 30
+        ghosts += f4["ghost_fraction"]
+        yields.append(m["yield"])
+        errors.append(m["velocity_error_rel"])
+    # the three other cameras carry frame 4: its particles are still found, without a crowd of ghosts
+    assert found / 90 > DROPPED_FRAME_MIN_YIELD and ghosts / 3 < DROPPED_FRAME_MAX_GHOSTS
+    assert np.mean(yields) > DROPPED_TRACK_MIN_YIELD and max(errors) < 0.05
 
 
 def test_a_sequence_of_one_frame_is_reconstructed_without_velocities():
