@@ -8,6 +8,8 @@ References:
   x >> 1), Rayleigh-Gans-Debye angular shape (|m - 1| << 1, 2x|m - 1| << 1).
 * Conservation: the optical theorem, Qabs >= 0 (= 0 without absorption), the phase
   function integrating to 1 (Gauss-Legendre on panels 1/x wide), |g| <= 1.
+* The phase tables: miepython called directly (tests/physics/mie_reference.py), at the deep
+  minima located numerically on it.
 """
 
 import math
@@ -17,6 +19,7 @@ import pytest
 
 from mitpiv.errors import ConfigError
 from mitpiv.physics import mie
+from tests.physics.mie_reference import deep_minima, miepython_par_per
 
 # the issue's hard cases: water/DEHS/polystyrene/TiO2-like, bubble, near-1, absorbing, metal-like
 INDICES = [1.33, 1.45, 1.59, 2.5, 0.75, 1.0001, 1.5 + 0.01j, 1.5 + 1j, 0.2 + 3j]
@@ -71,6 +74,18 @@ LOGNORMAL_MOMENT_REL_TOL = 1e-6
 # table (4096 nodes) at random angles, half of them in the 3/x forward peak; a resolution
 # requirement (no external reference), the error falls with the node count.
 PHASE_TABLE_L1_TOL = 0.01
+# A fixed table holds the float64 phase function at its (float32) nodes: the same series at
+# cosines that differ by the degree round trip (~1e-16 rad) times p's log-slope (~x <= 5000).
+TABLE_NODE_REL_TOL = 1e-10
+# The default table's stated accuracy (mie_phase docstring, mie.phase_table): relative, at
+# every angle, the deep minima included, above an absolute floor of 1e-10 of the peak. The
+# table is checked against miepython called here, not through mitpiv; no extra allowance:
+# the interpolant is evaluated in float64 exactly as tabulated.
+DEFAULT_TABLE_REL_TOL = mie.TABLE_TOLERANCE
+DEFAULT_TABLE_FLOOR = mie.TABLE_FLOOR
+# A minimum counts as deep when it is below 1e-2 of the largest value within two ripple
+# periods (pi/x) around it; the former default (1024 angles) was 100 % off at such minima.
+DEEP_MINIMUM_DEPTH = 1e-2
 
 
 def diam(x, n_medium=1.0):
@@ -260,21 +275,112 @@ def _sphere_integral_dist(dist):
 
 @pytest.mark.parametrize("x", [5.0, 200.0, 5000.0])
 def test_phase_table_interpolation_and_cache(x):
-    """The piecewise-linear table integrates to 1 exactly, converges to the exact phase
-    function as the resolution grows, and is cached by its parameters."""
+    """A fixed table holds the exact phase function at its nodes, its piecewise-linear
+    interpolant converges to it (L1) and integrates to 1 ever more closely as the resolution
+    grows, and tables are cached by their parameters."""
     d = diam(x)
     rng = np.random.default_rng(2)
     th = np.degrees(np.concatenate([rng.uniform(0, 3 / x, 200), rng.uniform(0, math.pi, 200)]))
     exact = mie.phase_function(d, 1.45, th, wavelength_nm=LAMBDA)
-    errs = []
+    errs, norm = [], []
     for n in (256, 1024, 4096):
         t = mie.phase_table(d, 1.45, wavelength_nm=LAMBDA, angles=n)
-        assert mie._trapz_mu(t.phase, t.mu)[0] == pytest.approx(1.0, abs=1e-12)
+        assert t.angles == n and t.tolerance is None and np.isfinite(t.max_error)
         assert t.theta[-1] == 0.0 and t.theta[0] == pytest.approx(math.pi) and np.all(np.diff(t.mu) > 0)
+        np.testing.assert_allclose(t.phase[0], mie.phase_function(d, 1.45, np.degrees(t.theta), wavelength_nm=LAMBDA),
+                                   rtol=TABLE_NODE_REL_TOL)
+        p = t.phase[0]  # the trapezoid rule over mu: the piecewise-linear interpolant's integral
+        norm.append(abs(2 * math.pi * np.sum(0.5 * (p[1:] + p[:-1]) * np.diff(t.mu)) - 1.0))
         interp = np.interp(np.cos(np.radians(th)), t.mu, t.phase[0])
         errs.append(np.sum(np.abs(interp - exact)) / np.sum(exact))
         assert mie.phase_table(d, 1.45, wavelength_nm=LAMBDA, angles=n) is t
     assert errs[2] < errs[0] and errs[2] < PHASE_TABLE_L1_TOL, errs
+    assert norm[2] < norm[0], norm
+
+
+def table_rel_error(t, theta, d_um):
+    """Largest relative error (floored) of the table's interpolants, linear in theta as the
+    renderer evaluates them, against miepython at ``theta`` [rad]."""
+    par, per = miepython_par_per(d_um, theta)
+    floor = DEFAULT_TABLE_FLOOR * max(par.max(), per.max())
+    asc = t.theta[::-1]
+    e = [np.abs(np.interp(theta, asc, tab[0][::-1]) - ref) / (ref + floor) for tab, ref in ((t.p_par, par), (t.p_per, per))]
+    return np.maximum(*e)
+
+
+@pytest.mark.parametrize("d_um, n_deep", [(5.0, 8), (20.0, 24)], ids=["5um", "20um"])
+def test_default_table_within_tolerance_at_every_angle_and_deep_minima(d_um, n_deep):
+    """A 5 um and a 20 um DEHS droplet in air at 532 nm: the default table is within its
+    stated relative tolerance of miepython on a dense grid and at (and around) every deep
+    minimum of p_par and p_per, located numerically; the former default, 1024 fixed angles,
+    misses the same minima by far more (so the check has teeth)."""
+    minima = deep_minima(d_um, DEEP_MINIMUM_DEPTH)
+    assert len(minima) >= n_deep, len(minima)
+    t0, w = minima[:, 0], minima[:, 1]
+    around = (t0[:, None] + w[:, None] * np.array([-3, -1, -0.3, 0, 0.3, 1, 3])).ravel()
+    dense = np.linspace(0.0, math.pi, 200001)
+    t = mie.phase_table(d_um, 1.45)
+    assert t.tolerance == DEFAULT_TABLE_REL_TOL and t.max_error <= DEFAULT_TABLE_REL_TOL
+    e_min, e_dense = table_rel_error(t, around, d_um), table_rel_error(t, dense, d_um)
+    assert e_min.max() <= DEFAULT_TABLE_REL_TOL, (around[np.argmax(e_min)], e_min.max())
+    assert e_dense.max() <= DEFAULT_TABLE_REL_TOL, (dense[np.argmax(e_dense)], e_dense.max())
+    old = mie.phase_table(d_um, 1.45, angles=1024)
+    assert table_rel_error(old, around, d_um).max() > 100 * DEFAULT_TABLE_REL_TOL
+
+
+@pytest.mark.parametrize("tolerance", [1e-2, 1e-4])
+def test_table_tolerance_is_the_knob(tolerance):
+    """The node count follows x / sqrt(tolerance) (within the estimate used to refuse costly
+    tables) and the error follows the tolerance, for a 5 um droplet."""
+    t = mie.phase_table(5.0, 1.45, tolerance=tolerance)
+    default = mie.phase_table(5.0, 1.45)
+    assert (t.angles < default.angles) == (tolerance > DEFAULT_TABLE_REL_TOL)
+    assert t.angles <= mie.adaptive_angles_estimate(mie.size_parameter(5.0), tolerance)
+    dense = np.linspace(0.0, math.pi, 100001)
+    assert table_rel_error(t, dense, 5.0).max() <= tolerance
+
+
+def test_table_of_a_distribution_and_of_several_diameters():
+    """A log-normal distribution's averaged row meets the tolerance against the number- and
+    C_sca-weighted miepython average; a per-particle table takes the grid of its largest
+    diameter, on which that row meets it."""
+    dist = mie.lognormal(5.0, 1.05, nodes=21, span=3.0)
+    t = mie.phase_table(dist, 1.45)
+    th = np.linspace(0.0, math.pi, 50001)
+    par, per, c = np.zeros_like(th), np.zeros_like(th), 0.0
+    for d, w in zip(dist.diameters_um, dist.weights, strict=True):
+        csca = mie.efficiencies(d, 1.45).csca_mm2  # C_sca weighting (the reference is miepython's p)
+        a, b = miepython_par_per(d, th)
+        par, per, c = par + w * csca * a, per + w * csca * b, c + w * csca
+    par, per = par / c, per / c
+    floor = DEFAULT_TABLE_FLOOR * par.max()
+    asc = t.theta[::-1]
+    for tab, ref in ((t.p_par, par), (t.p_per, per)):
+        assert np.max(np.abs(np.interp(th, asc, tab[0][::-1]) - ref) / (ref + floor)) <= DEFAULT_TABLE_REL_TOL
+    rows = mie.phase_table(np.array([3.0, 4.0, 5.0]), 1.45)
+    single = mie.phase_table(5.0, 1.45)
+    np.testing.assert_array_equal(rows.theta, single.theta)
+    np.testing.assert_array_equal(rows.p_par[2], single.p_par[0])
+    assert table_rel_error(single, th, 5.0).max() <= DEFAULT_TABLE_REL_TOL
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        ({"angles": 10**8}, r"'angles' must be an integer >= 16 and <= 4194304, got 100000000"),
+        ({"angles": 4096.5}, r"'angles' must be an integer"),
+        ({"angles": 1 << 22, "diameter_um": np.linspace(1.0, 3.0, 400)}, r"'angles' = 4194304 needs about .* GiB"),
+        ({"tolerance": 0.0}, r"'tolerance' \(relative\) must lie in \[1e-06, 0.1\], got 0.0"),
+        ({"tolerance": 1e-6, "diameter_um": 1000.0}, r"within the relative 'tolerance' 1e-06 needs about .* s to build"),
+    ],
+    ids=["absurd_angles", "fractional_angles", "too_much_memory", "zero_tolerance", "too_slow"],
+)
+def test_table_settings_refused_up_front(kw, match):
+    """Absurd table settings are refused before anything is computed, naming the parameter,
+    the value and the fix (the estimate: mie.table_cost)."""
+    kw = {"diameter_um": 5.0, **kw}
+    with pytest.raises(ConfigError, match=match):
+        mie.phase_table(kw.pop("diameter_um"), 1.45, **kw)
 
 
 @pytest.mark.parametrize(

@@ -3,7 +3,8 @@
 References: mitpiv.physics.mie in float64 (itself checked against scattnlay and closed
 forms in tests/physics/test_mie.py), the pinhole's closed-form power
 I f_px^2 / (dist^2 cos^3) (here cos = 1: each camera looks at the particle), and Mitsuba's
-chi-square tooling for eval/sample/pdf consistency.
+chi-square tooling for eval/sample/pdf consistency. The default table at the deep minima of
+5 um and 20 um droplets: miepython called directly (tests/physics/mie_reference.py).
 """
 
 import math
@@ -19,6 +20,7 @@ from mitpiv.io import write_particles_ply
 from mitpiv.physics import mie
 from mitpiv.physics.camera import PinholeCamera, look_at_rotation
 from mitpiv.render.scene import load_dict
+from tests.physics.mie_reference import miepython_par_per, refine_minimum
 
 from .helpers import render
 
@@ -33,7 +35,7 @@ OIL = {"type": "mie", "index": 1.45}  # DEHS / oil droplet in air, 532 nm (the s
 PHASE_EVAL_REL_TOL = 2e-2
 PHASE_EVAL_ABS_TOL_OF_PEAK = 1e-6
 # Rendered power against the float64 closed form E dC/dOmega f_px^2 / dist^2: float32 kernels
-# and the linear interpolation of the default 1024-angle table (the particle tracer is
+# and the linear interpolation of the default table (within 1e-3; the particle tracer is
 # deterministic for a pinhole, so there is no Monte Carlo noise). Also the volpath cloud's
 # mie / isotropic ratio (the cloud spans +-0.23 deg of scattering angle).
 POWER_REL_TOL = 2e-3
@@ -49,6 +51,24 @@ DIPOLE_RATIO_ABS_TOL = 1e-5
 # The diameter table's spacing in x (size_step) is the accuracy knob of per-particle
 # diameters: (size_step, rtol of the power against the float64 cross-section).
 SIZE_STEP_AND_RTOL = [(0.02, 5e-3), (0.002, 1e-3)]
+# The default table (issue 55) against miepython. Each rendered value is within the table's
+# stated relative tolerance, so a ratio of two cameras is within twice it, and the phase
+# plugin's pdf (the interpolant renormalised to integrate to 1, which moves it by at most the
+# tolerance) within twice it too.
+RATIO_REL_TOL = 2 * mie.TABLE_TOLERANCE
+PDF_REL_TOL = 2 * mie.TABLE_TOLERANCE
+# Float32 geometry: the kernels compute the scattering angle from float32 positions and
+# directions (2 atan2(|a - b|, |a + b|)), within ANGLE_ERR_RAD of the float64 geometry: 4
+# float32 ulps of an angle near pi/2 (1.2e-7 rad each) plus the camera position's rounding
+# (3e-5 mm at 500 mm, 6e-8 rad). Its effect is the reference's own change over
+# +-ANGLE_ERR_RAD (first order on a minimum's flank, second order at its bottom), added per
+# camera. Particle tracing into a pinhole is deterministic (one direction per particle, no
+# Monte Carlo noise); FLOAT32_REL covers the float32 products of one particle's value.
+ANGLE_ERR_RAD = 5e-7
+FLOAT32_REL = 1e-5
+# A deep minimum here: below 1e-2 of the value at the reference camera (45 deg); the former
+# default table (1024 angles) missed the 5 um droplet's perpendicular one by > 100 %.
+DEEP = 1e-2
 
 
 def cam_towards(direction, dist=DIST, target=(0.0, 0.0, 0.0)):
@@ -100,12 +120,15 @@ def polar(theta_deg, phi_deg):
         {"diameter_um": 0.5, "index": 0.2, "index_imag": 3.0},
         {"diameter_um": 2.0, "geometric_std": 1.2, "index": 1.45},
         {"diameters_um": "1.5, 3.0", "weights": "2, 1", "index": 1.59, "medium_index": 1.333},
+        {"diameter_um": 20.0, "index": 1.45},
     ],
-    ids=["oil_1um", "polystyrene_5um_peaked", "metal_like", "lognormal", "in_water_two_sizes"],
+    ids=["oil_1um", "polystyrene_5um_peaked", "metal_like", "lognormal", "in_water_two_sizes", "oil_20um_adaptive"],
 )
 def test_phase_chi2(props):
     """Mitsuba's chi-square test of sample() against eval_pdf(); the forward peak is put on
-    the equator of the test's (phi, cos theta) grid, where its cells are small."""
+    the equator of the test's (phi, cos theta) grid, where its cells are small. The default
+    tables are chosen for the tolerance (non-uniform nodes, 13810 of them at 20 um): the
+    sampler stays exact for their interpolant."""
     sample_func, pdf_func = mi.chi2.PhaseFunctionAdapter("mie", {"type": "mie", **props}, wi=[0.6, 0.8, 0.0])
     chi2 = mi.chi2.ChiSquareTest(domain=mi.chi2.SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
                                  sample_dim=3, res=201, ires=16)
@@ -160,7 +183,7 @@ def test_mie_phase_in_a_medium_volpath(tmp_path):
 
     for theta in (20.0, 90.0, 160.0):
         ratio = cloud({"type": "mie", "diameter_um": 1.0, "index": 1.45}, theta) / cloud({"type": "isotropic"}, theta)
-        # the cloud spans +-0.23 deg; the table interpolates at 1024 nodes
+        # the cloud spans +-0.23 deg; the default table interpolates within 1e-3
         assert ratio == pytest.approx(4 * math.pi * mie.phase_function(1.0, 1.45, [theta], wavelength_nm=532)[0],
                                      rel=POWER_REL_TOL)
     assert live.emitters()  # still alive during the medium renders above
@@ -261,11 +284,92 @@ def test_per_particle_diameters(tmp_path, size_step, rtol):
     np.testing.assert_allclose(sums, dcs * cam.focal_px**2 / (dist**2 * cos**3), rtol=rtol)
 
 
+def angle_allowance(d_um, k, theta):
+    """Relative change of the reference p_par (k = 0) / p_per (k = 1) over +-ANGLE_ERR_RAD."""
+    p = miepython_par_per(d_um, [theta - ANGLE_ERR_RAD, theta, theta + ANGLE_ERR_RAD])[k]
+    return float(np.max(np.abs(p / p[1] - 1)))
+
+
+# (k, lo, hi): the minimum of p_par (k = 0) or p_per (k = 1) searched in [lo, hi] deg
+DEEP_MINIMA = {5.0: [(1, 75.0, 80.0), (1, 95.0, 99.0), (0, 115.0, 120.0)],
+               20.0: [(1, 75.0, 78.0), (0, 94.0, 97.0), (1, 164.0, 167.0), (0, 174.0, 177.0)]}
+
+
+@pytest.mark.parametrize("d_um", [5.0, 20.0], ids=["5um", "20um"])
+def test_camera_ratios_at_deep_minima_match_miepython(tmp_path, d_um):
+    """A 5 um and a 20 um DEHS droplet (per-particle diameter from the file) in a sheet
+    polarised in (p_par) or across (p_per) the cameras' scattering plane: the ratio of each
+    camera's image sum to a camera at 45 deg equals miepython's p(theta) / p(45 deg) within
+    the default table's stated tolerance, for cameras at the deep minima (located
+    numerically) and at 30, 90 and 150 deg. The former default (1024 angles) fails at the
+    5 um droplet's perpendicular minimum, so the check has teeth."""
+    ref_deg = 45.0
+    cams = {0: [30.0, 90.0, 150.0], 1: [30.0, 90.0, 150.0]}
+    for k, lo, hi in DEEP_MINIMA[d_um]:
+        t0, p0, _ = refine_minimum(d_um, k, math.radians(lo), math.radians(hi))
+        assert p0 < DEEP * miepython_par_per(d_um, [math.radians(ref_deg)])[k][0], (lo, hi)
+        cams[k].append(math.degrees(t0))
+
+    def power(theta_deg, k, phase=None):
+        pol = (0, 1, 0) if k == 0 else (0, 0, 1)  # cameras in the x-y plane: pol y is p_par
+        sc = particle_scene(tmp_path, cam_towards(polar(theta_deg, 0.0)), diameters=d_um, polarization=pol, phase=phase)
+        return render(sc).sum()
+
+    for k, thetas in cams.items():
+        base = power(ref_deg, k)
+        p_ref = miepython_par_per(d_um, np.radians([ref_deg] + thetas))[k]
+        for theta, p in zip(thetas, p_ref[1:], strict=True):
+            tol = RATIO_REL_TOL + angle_allowance(d_um, k, math.radians(theta)) + \
+                angle_allowance(d_um, k, math.radians(ref_deg)) + FLOAT32_REL
+            err = (power(theta, k) / base) / (p / p_ref[0]) - 1
+            assert abs(err) <= tol, (d_um, k, theta, err, tol)
+    if d_um == 5.0:
+        old = {**OIL, "angles": 1024}
+        theta = cams[1][3]  # the perpendicular minimum near 77 deg
+        p = miepython_par_per(d_um, np.radians([ref_deg, theta]))[1]
+        err = (power(theta, 1, old) / power(ref_deg, 1, old)) / (p[1] / p[0]) - 1
+        assert abs(err) > 10 * RATIO_REL_TOL, err
+
+
+@pytest.mark.parametrize("d_um", [5.0, 20.0], ids=["5um", "20um"])
+def test_default_phase_pdf_at_deep_minima(d_um):
+    """The mie phase plugin's eval/pdf (float32 kernels, default table) against miepython's
+    unpolarised phase function at its deep minima (located numerically) and on 2001 angles."""
+    ph = mi.load_dict({"type": "mie", "diameter_um": d_um, "index": 1.45})
+    th = np.linspace(0.0, math.pi, 2001)[1:-1]
+    par, per = miepython_par_per(d_um, th)
+    p = 0.5 * (par + per)
+    i = np.flatnonzero((p[1:-1] < p[:-2]) & (p[1:-1] < p[2:])) + 1
+    minima = []
+    for j in i:
+        from scipy.optimize import minimize_scalar
+
+        r = minimize_scalar(lambda t: float(np.mean(miepython_par_per(d_um, [t]), axis=0)[0]),
+                            bounds=(th[j - 1], th[j + 1]), method="bounded", options={"xatol": 1e-10})
+        minima.append(r.x)
+    t = np.concatenate([th, minima])
+    # build directions whose float32 angle is known exactly: the reference is evaluated there
+    wo32 = np.stack([np.sin(t), np.zeros_like(t), np.cos(t)]).astype(np.float32)
+    t_exact = np.arctan2(wo32[0].astype(np.float64), wo32[2].astype(np.float64))
+    mei = dr.zeros(mi.MediumInteraction3f, len(t))
+    mei.wi = mi.Vector3f(0, 0, -1)  # light travels along +z
+    mei.sh_frame = mi.Frame3f(mei.wi)
+    _, pdf = ph.eval_pdf(mi.PhaseFunctionContext(), mei, mi.Vector3f(wo32))
+    par, per = miepython_par_per(d_um, t_exact)
+    ref = 0.5 * (par + per)
+    allow = np.array([max(angle_allowance(d_um, 0, ti), angle_allowance(d_um, 1, ti)) for ti in t_exact])
+    err = np.abs(np.array(pdf) / ref - 1)
+    assert len(minima) > 5 and np.all(err <= PDF_REL_TOL + allow + FLOAT32_REL), (t[np.argmax(err - allow)], err.max())
+
+
 def test_metadata_describes_mie(tmp_path):
     sc = particle_scene(tmp_path, cam_towards(polar(45.0, 90.0)), polarization=(0, 1, 0))
     em = [s.emitter() for s in sc.shapes()][0].describe()
     assert em["scattering_efficiency"] == "mie" and em["phase"]["index"] == [1.45, 0.0]
     assert em["sheet"]["polarization"] == [0.0, 1.0, 0.0]
+    # the table's settings and what they gave (a 1 um droplet: 926 nodes)
+    assert em["phase"]["tolerance"] == mie.TABLE_TOLERANCE and 0 < em["phase"]["max_error"] <= mie.TABLE_TOLERANCE
+    assert em["phase"]["angles"] == len(sc.shapes()[0].emitter()._xs["theta"])
 
 
 @pytest.mark.parametrize(
@@ -278,12 +382,16 @@ def test_metadata_describes_mie(tmp_path):
         ({"phase": {**OIL, "wavelength_nm": 633.0}}, "differs from the laser's 532"),
         ({"phase": {**OIL, "index_imag": -0.1}}, "'index_imag' must be >= 0"),
         ({"phase": {**OIL, "angles": 8}}, "'angles' must be an integer >= 16"),
+        ({"phase": {**OIL, "angles": 100000000}}, "'angles' must be an integer >= 16 and <= 4194304, got 100000000"),
+        ({"phase": {**OIL, "angles": 4096, "tolerance": 1e-3}}, "either 'angles'.*or 'tolerance'"),
+        ({"phase": {**OIL, "tolerance": 0.5}}, r"'tolerance' \(relative\) must lie in \[1e-06, 0.1\], got 0.5"),
         ({"phase": {**OIL, "geometric_std": 1.3}}, "'geometric_std' needs 'diameter_um'"),
         ({"phase": {**OIL, "diameters_um": "1, x"}}, "comma-separated list"),
         ({"phase": {**OIL, "colour": "red"}}, "unknown parameter.*colour"),
     ],
     ids=["pol_along_laser", "pol_without_mie", "q_sca_with_mie", "two_diameters", "wavelength_mismatch",
-         "negative_k", "table_too_small", "lognormal_without_median", "bad_list", "unknown_property"],
+         "negative_k", "table_too_small", "table_absurd", "angles_and_tolerance", "tolerance_too_loose",
+         "lognormal_without_median", "bad_list", "unknown_property"],
 )
 def test_bad_input(tmp_path, kw, match):
     with pytest.raises(ConfigError, match=match):

@@ -17,9 +17,15 @@ medium_index : float, default 1.0
 wavelength_nm : float [nm]; default 532, or the laser's
     Vacuum wavelength. Nested in ``tracer_particles`` it defaults to the laser
     sheet's and must agree with it.
-angles : integer, default 1024
-    Table resolution (nodes in the scattering angle; half of them in the forward
-    peak for large particles, see :func:`mitpiv.physics.mie.angle_grid`).
+tolerance : float, default 1e-3
+    Relative tolerance of the table: its nodes in the scattering angle are chosen so
+    that the interpolated phase function (parallel, perpendicular and unpolarised, as
+    ``tracer_particles`` and this plugin evaluate them) is within ``tolerance`` of Mie
+    theory at every angle, the deep minima included (range 1e-6 to 0.1; see Notes).
+angles : integer, default none (chosen for ``tolerance``)
+    A fixed table resolution instead (16 to 4194304 nodes in the scattering angle; half
+    of them in the forward peak for large particles, see
+    :func:`mitpiv.physics.mie.angle_grid`). Not with ``tolerance``.
 size_step : float, default 0.02
     Nested in ``tracer_particles`` with per-particle diameters: spacing, in size
     parameter x, of the diameters tabulated for the per-particle lookup (linear
@@ -27,9 +33,50 @@ size_step : float, default 0.02
 
 Notes
 -----
-The table holds ``2 pi sin(theta) p(theta)`` on a grid in the scattering angle theta and
-is interpolated linearly in theta; ``eval``, ``pdf`` and ``sample`` (inverse CDF, exact
-for the interpolant) are therefore consistent. Angles are computed as
+Accuracy. The table is interpolated linearly in the scattering angle theta. By default
+its nodes are chosen for the particle sizes the scene renders
+(:func:`mitpiv.physics.mie.phase_table`): 8 per ripple period pi/x, then every interval
+whose interpolation error at its midpoint exceeds half the tolerance is halved, so the
+nodes crowd towards the deep minima. The stated tolerance, relative at every angle,
+
+    ``|p_table(theta) - p(theta)| <= tolerance (p(theta) + 1e-10 max p)``
+
+holds for one diameter and for a distribution (``geometric_std``, ``diameters_um``),
+for ``p_par``, ``p_per`` and their mean (the absolute floor, 1e-10 of the forward peak,
+only matters at exact zeros such as a dipole's parallel intensity at 90 deg). Measured
+against Mie theory on 300,000 angles and at every minimum (DEHS, n = 1.45, in air,
+532 nm; ``bench/bench_mie.py``, 2-core CPU), with the former default of 1024 fixed
+angles beside it:
+
+========  =====  =====  ===============  ==========  ===============  ==========
+diameter  x      nodes  max rel. error   build [ms]  1024: max error  build [ms]
+========  =====  =====  ===============  ==========  ===============  ==========
+1 um      5.9    926    4.9e-4           4           9.5e-2           1
+5 um      29.5   4154   5.3e-4           12          9.6              2
+20 um     118    13810  5.2e-4           83          165              6
+========  =====  =====  ===============  ==========  ===============  ==========
+
+Render time does not change measurably (particle tracing of 200k particles and camera
+tracing at 16 spp: 0.8-1.1 times the former default's, within the run-to-run noise): the
+lookup is a binary search, up to 14 steps instead of 10. The node count grows as
+``x / sqrt(tolerance)`` (:func:`mitpiv.physics.mie.adaptive_angles_estimate`; x = 1000:
+116,000 nodes in 4 s); a table whose estimated memory or build time exceeds 4 GiB or
+300 s (x = 1e4 at the default tolerance) is refused before it is built, with the estimate
+and the fix (loosen ``tolerance``, or give ``angles``). The ``describe()`` metadata
+records the nodes, the tolerance and the measured ``max_error``.
+
+Float32 kernels compute the angle to about 1e-7 rad, a relative error of up to
+1e-7 / w on the flank of a minimum of width w (w >= 1.4e-4 rad for the 20 um droplet).
+
+Per-particle diameters (a particle file with several diameters, ``size_step``): the table
+takes the grid of its largest diameter, whose ripple is the finest; its other rows are
+resolved to the tolerance away from their own deep minima, where (as between rows) the
+diameter spacing sets the error. The image of 20k log-normal 1 um particles is within
+3e-5 (relative L1) of a 65536-angle table and within 1.6e-4 of a ``size_step`` 0.001 one.
+
+Sampling. The table holds ``2 pi sin(theta) p(theta)`` at its nodes, interpolated
+linearly in theta; ``eval``, ``pdf`` and ``sample`` (inverse CDF, exact for the
+interpolant) are therefore consistent. Angles are computed as
 ``2 atan2(|wo + wi|, |wo - wi|)``, accurate in float32 down to the 1/x-wide forward
 peak of large spheres (cos(theta) would round to 1 there). Usable as the phase function of
 a Mitsuba medium (``volpath``) and nested in ``tracer_particles``, which then also takes the
@@ -42,6 +89,7 @@ Mie theory.
         <float name="diameter_um" value="1"/>
         <float name="index" value="1.45"/>
         <float name="medium_index" value="1.0"/>
+        <float name="tolerance" value="1e-3"/>  <!-- the default -->
     </phase>
 """
 
@@ -97,9 +145,11 @@ class MiePhase(mi.PhaseFunction):
         self.medium_index = check_positive("medium_index", rd.float("medium_index", 1.0), owner="mie")
         wl = rd.float("wavelength_nm", None)
         self.wavelength_nm = None if wl is None else check_positive("wavelength_nm", wl, owner="mie", unit="nm")
-        self.angles = rd.int("angles", 1024)
+        self.angles = rd.int("angles", None)
+        tol = rd.float("tolerance", None)
         self.size_step = check_positive("size_step", rd.float("size_step", 0.02), owner="mie")
         rd.finish()
+        self.angles, self.tolerance = mie.check_table_settings(self.angles, tol)
         if k < 0:
             raise ConfigError(f"mie: 'index_imag' must be >= 0 (the index is n + ik), got {k!r}.")
         self.m_particle = complex(check_positive("index", n, owner="mie"), k)
@@ -127,6 +177,7 @@ class MiePhase(mi.PhaseFunction):
         else:
             self.size = None if d is None else check_positive("diameter_um", d, owner="mie", unit="um")
         self._distr = None
+        self._last_table = None
         #: set by tracer_particles, which reads this plugin's cross-section table instead
         self.nested_in_tracer = False
         if self.size is not None:
@@ -145,7 +196,8 @@ class MiePhase(mi.PhaseFunction):
         if self.wavelength_nm is not None and wavelength_nm is not None and abs(self.wavelength_nm - wavelength_nm) > 1e-9:
             raise ConfigError(f"mie: 'wavelength_nm' = {self.wavelength_nm} differs from the laser's {wavelength_nm} nm; "
                               f"leave it out to use the laser's.")
-        return mie.phase_table(size, self.m_particle, wavelength_nm=wl, n_medium=self.medium_index, angles=self.angles)
+        kw = {"angles": self.angles} if self.angles is not None else {"tolerance": self.tolerance}
+        return mie.phase_table(size, self.m_particle, wavelength_nm=wl, n_medium=self.medium_index, **kw)
 
     def cross_section_table(self, diameters_um=None, wavelength_nm=None) -> dict:
         """Differential cross-sections [mm^2/sr] for ``tracer_particles`` (NumPy, float64).
@@ -173,8 +225,10 @@ class MiePhase(mi.PhaseFunction):
             t = self.table(grid, wavelength_nm=wavelength_nm)
             d0, dd = lo, (grid[1] - grid[0]) if rows > 1 else 0.0
         c = t.csca_mm2[:, None]
+        self._last_table = t
         return {"theta": t.theta[::-1].copy(), "d0_um": d0, "dd_um": dd, "csca_mm2": t.csca_mm2.copy(),
-                "par": (c * t.p_par)[:, ::-1].copy(), "per": (c * t.p_per)[:, ::-1].copy()}
+                "par": (c * t.p_par)[:, ::-1].copy(), "per": (c * t.p_per)[:, ::-1].copy(),
+                "max_error": t.max_error}
 
     def _build(self, wavelength_nm):
         t = self.table(wavelength_nm=wavelength_nm)
@@ -187,7 +241,7 @@ class MiePhase(mi.PhaseFunction):
         self._theta = mi.Float(theta.astype(np.float32))
         self._g = mi.Float(g.astype(np.float32))
         self._distr = mi.IrregularContinuousDistribution(self._theta, self._g)
-        self._table = t
+        self._table = self._last_table = t
 
     def _require(self) -> bool:
         """True when this phase has a table to sample and evaluate.
@@ -239,14 +293,22 @@ class MiePhase(mi.PhaseFunction):
 
     def to_string(self):
         return (f"MiePhase[size={self.size!r}, m={self.m_particle}, medium={self.medium_index}, "
-                f"wavelength={self.wavelength_nm}, angles={self.angles}]")
+                f"wavelength={self.wavelength_nm}, angles={self.angles}, tolerance={self.tolerance}]")
 
     def describe(self) -> dict:
         size = self.size
         if isinstance(size, mie.SizeDistribution):
             size = {"diameters_um": size.diameters_um.tolist(), "weights": size.weights.tolist()}
         return {"type": "mie", "size_um": size, "index": [self.m_particle.real, self.m_particle.imag],
-                "medium_index": self.medium_index, "wavelength_nm": self.wavelength_nm, "angles": self.angles}
+                "medium_index": self.medium_index, "wavelength_nm": self.wavelength_nm, **self.table_info()}
+
+    def table_info(self) -> dict:
+        """The table's settings and what they gave: ``angles`` (nodes of the last table built, or
+        the fixed count), ``tolerance`` (None for fixed ``angles``), ``max_error`` (relative,
+        at the nodes' midpoints of the row the grid was chosen on; None before a table is built)."""
+        t = self._last_table
+        return {"angles": t.angles if t is not None else self.angles, "tolerance": self.tolerance,
+                "max_error": None if t is None else float(t.max_error)}
 
 
 mi.register_phase("mie", lambda props: MiePhase(props))
