@@ -22,3 +22,17 @@ def assert_second_edition(res: dict, out: Path) -> None:
     first = (out / "report.md").read_text().splitlines()[0]
     assert first.startswith(f"**{t['agree']} of {t['n']} physics rows agree, {t['disagree']} disagree, "
                             f"{t['inconclusive']} inconclusive (arm paper-model)")
+
+
+def committed_rows(name: str, *, declared: bool = False) -> list:
+    """The rows of the committed full run ``docs/replications/NAME/results.json``: as written
+    (``declared=True``), or without their kind, why and reads, which the study's declarations
+    give again (:func:`mitpiv.replications.frame.classify_rows`)."""
+    import json
+
+    from mitpiv.replications.frame import Row
+
+    f = Path(__file__).resolve().parents[2] / "docs" / "replications" / name / "results.json"
+    drop = () if declared else ("kind", "why", "reads")
+    return [Row.from_dict({k: v for k, v in r.items() if k not in drop})
+            for r in json.loads(f.read_text(encoding="utf-8"))["rows"]]

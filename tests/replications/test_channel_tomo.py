@@ -19,7 +19,7 @@ from mitpiv.replications.channel_tomo.model import (
 from mitpiv.replications.channel_tomo.study import STUDY, cost_estimate, error_decomposition, s_d
 from mitpiv.replications.frame import RESULTS_KEYS, replicate
 
-from .helpers import assert_second_edition
+from .helpers import assert_second_edition, committed_rows
 
 SYSTEM = ChannelTomoSystem()
 
@@ -175,22 +175,12 @@ def test_committed_rows_have_kinds():
     """The study's kinds applied to the committed full results: every declaration matches a
     row, the rows that restate the Mie factor fitted to Table 2 are inputs, and no physics
     row reads a result of the paper."""
-    import dataclasses
     import fnmatch
-    import json
-    from pathlib import Path
 
     from mitpiv.replications.channel_tomo.study import INPUTS_FROM_PAPER, KINDS
-    from mitpiv.replications.frame import Row, classify_rows
+    from mitpiv.replications.frame import classify_rows
 
-    f = Path(__file__).resolve().parents[2] / "docs" / "replications" / "channel-tomo" / "results.json"
-    names = {fl.name for fl in dataclasses.fields(Row)} - {"kind", "why", "reads"}  # re-derived from KINDS
-    rows = []
-    for r in json.loads(f.read_text(encoding="utf-8"))["rows"]:
-        d = {k: v for k, v in r.items() if k in names}
-        if d.get("ci") is not None:
-            d["ci"] = tuple(d["ci"])
-        rows.append(Row(**d))
+    rows = committed_rows("channel-tomo")  # kinds re-derived from KINDS
     assert STUDY.kinds is KINDS and STUDY.inputs_from_paper is INPUTS_FROM_PAPER
     ids = [r.id for r in rows]
     for key in KINDS:

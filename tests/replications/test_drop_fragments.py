@@ -9,7 +9,7 @@ import pytest
 from mitpiv.replications.drop_fragments.study import STUDY
 from mitpiv.replications.frame import RESULTS_KEYS, replicate
 
-from .helpers import assert_second_edition
+from .helpers import assert_second_edition, committed_rows
 
 # The pellets are 2.0 mm spheres; the plenoptic sizing of the paper's camera at |M| = 0.28
 # (one refocused pixel ~0.14 mm) should land within a pixel or so of it.
@@ -76,15 +76,10 @@ def test_committed_rows_are_classified():
     truth-based rows set against the paper's estimator are not physics; no physics row
     reads a declared input; every row computed from the drop-impact fragment field (its id
     names a condition) reads one."""
-    import dataclasses
-    import json
-    from pathlib import Path
 
-    from mitpiv.replications.frame import Row, classify_rows, unused_kinds
+    from mitpiv.replications.frame import classify_rows, unused_kinds
 
-    path = Path(__file__).resolve().parents[2] / "docs" / "replications" / "drop-fragments" / "results.json"
-    names = {f.name for f in dataclasses.fields(Row)}
-    rows = [Row(**{k: v for k, v in r.items() if k in names}) for r in json.loads(path.read_text())["rows"]]
+    rows = committed_rows("drop-fragments")
     assert unused_kinds(STUDY, rows) == []
     by_id = {r.id: r for r in classify_rows(STUDY, rows)}
     assert len(by_id) == len(rows)

@@ -32,6 +32,8 @@ from mitpiv.replications.frame import (
     tally_line,
 )
 
+from .helpers import committed_rows
+
 CALLS: list[int] = []
 
 
@@ -344,10 +346,10 @@ def test_the_committed_results_carry_the_studies_kinds_and_the_generated_tally(n
     folder = Path(__file__).resolve().parents[2] / "docs" / "replications" / name
     d = json.loads((folder / "results.json").read_text())
     assert d["study"] == name and all(r["kind"] in KINDS for r in d["rows"])
-    rows = [Row.from_dict(r) for r in d["rows"]]
+    rows = committed_rows(name, declared=True)
     # the committed kinds are the study's declarations today (rows made afresh from the numbers alone)
     study = get_study(name)
-    bare = [Row(**{k: v for k, v in r.__dict__.items() if k not in ("kind", "why", "reads")}) for r in rows]
+    bare = committed_rows(name)
     assert [(r.kind, r.why, r.reads) for r in classify_rows(study, bare)] == [(r.kind, r.why, r.reads) for r in rows]
     assert not replication.unused_kinds(study, rows)
     assert not [r.id for r in rows if r.kind == "physics" and (r.reads or r.verdict == "not compared")]

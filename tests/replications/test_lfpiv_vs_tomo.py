@@ -13,7 +13,7 @@ from mitpiv.replications.frame import RESULTS_KEYS, replicate
 from mitpiv.replications.lfpiv_vs_tomo import model as S
 from mitpiv.replications.lfpiv_vs_tomo.study import STUDY, cost_estimate
 
-from .helpers import assert_second_edition
+from .helpers import assert_second_edition, committed_rows
 
 
 def test_quick_run_schema_and_ids(tmp_path):
@@ -349,17 +349,11 @@ def test_committed_rows_take_the_declared_kinds():
     """The committed full results classified by the study's KINDS (issue 44): every declaration
     matches a row, the arithmetic on the paper's tables is definition, the rows the paper has no
     value for are info, and no physics row is left uncompared or reads a paper result."""
-    import dataclasses
-    import json
-    from pathlib import Path
 
-    from mitpiv.replications.frame import Row, classify_rows, tally, unused_kinds
+    from mitpiv.replications.frame import classify_rows, tally, unused_kinds
     from mitpiv.replications.lfpiv_vs_tomo.study import INPUTS_FROM_PAPER, KINDS
 
-    committed = Path(__file__).resolve().parents[2] / "docs" / "replications" / "lfpiv-vs-tomo" / "results.json"
-    fields = {f.name for f in dataclasses.fields(Row)}
-    raw = json.loads(committed.read_text())["rows"]
-    rows = [Row(**{k: v for k, v in r.items() if k in fields}) for r in raw]
+    rows = committed_rows("lfpiv-vs-tomo")
     out = {r.id: r for r in classify_rows(STUDY, rows)}
     assert STUDY.kinds is KINDS and STUDY.inputs_from_paper is INPUTS_FROM_PAPER
     assert unused_kinds(STUDY, rows) == []
@@ -379,7 +373,7 @@ def test_committed_rows_take_the_declared_kinds():
     # could not have failed: the tomographic time ratios within a factor 3 of 1.01-1.37
     assert out["time_ratio_tomo_nc8_ppp0.1"].kind == "info"
     # every row the paper has no value for is info (46 in the committed run)
-    uncompared = [r["id"] for r in raw if r["agrees"] is None]
+    uncompared = [r.id for r in rows if r.agrees is None]
     assert len(uncompared) == 46 and all(out[i].kind == "info" for i in uncompared)
     assert not [i for i, r in out.items() if r.kind == "physics" and r.agrees is None]
     assert not [i for i, r in out.items() if r.kind == "physics" and r.reads]

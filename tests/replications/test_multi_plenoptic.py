@@ -13,7 +13,7 @@ from mitpiv.replications.frame import RESULTS_KEYS, replicate
 from mitpiv.replications.multi_plenoptic import model as S
 from mitpiv.replications.multi_plenoptic.study import STUDY
 
-from .helpers import assert_second_edition
+from .helpers import assert_second_edition, committed_rows
 
 # float64 sums over ~1e4 voxels: round-off ~1e-13; 1e-12 leaves room.
 EQ_RTOL = 1e-12
@@ -152,15 +152,9 @@ def test_scene_is_the_papers_system():
 
 
 def _committed_rows():
-    import json
-    from dataclasses import fields
-    from pathlib import Path
 
-    from mitpiv.replications.frame import Row
 
-    f = Path(__file__).resolve().parents[2] / "docs" / "replications" / "multi-plenoptic" / "results.json"
-    names = {fl.name for fl in fields(Row)}
-    return [Row(**{k: v for k, v in r.items() if k in names}) for r in json.loads(f.read_text())["rows"]]
+    return committed_rows("multi-plenoptic")
 
 
 def test_committed_rows_have_kinds_and_every_cause_is_declared():

@@ -16,7 +16,7 @@ from mitpiv.replications.frame import RESULTS_KEYS, replicate
 from mitpiv.replications.sapiv_distortion.model import SapivSystem, locate_dots, render_dot_windows
 from mitpiv.replications.sapiv_distortion.study import PAPER_TABLE_3_1, STUDY
 
-from .helpers import assert_second_edition
+from .helpers import assert_second_edition, committed_rows
 
 #: Table 3.1 is printed to 2 decimals (and 0.5 %, r_n = 0.1 reads 0.03 for 0.0354: truncated)
 TABLE_ROUNDING_PX = 0.0051 + 0.005
@@ -232,16 +232,11 @@ def test_kernel_table_refuses_bad_kernels(bad):
 def test_committed_rows_take_the_declared_kinds():
     """The committed full results classified by the study's KINDS: every declaration matches a
     row, the audit's findings hold (issue 44) and no physics row is left uncompared."""
-    import dataclasses
-    import json
-    from pathlib import Path
 
-    from mitpiv.replications.frame import Row, classify_rows, unused_kinds
+    from mitpiv.replications.frame import classify_rows, unused_kinds
     from mitpiv.replications.sapiv_distortion.study import INPUTS_FROM_PAPER, KINDS
 
-    committed = Path(__file__).resolve().parents[2] / "docs" / "replications" / "sapiv-distortion" / "results.json"
-    fields = {f.name for f in dataclasses.fields(Row)}
-    rows = [Row(**{k: v for k, v in r.items() if k in fields}) for r in json.loads(committed.read_text())["rows"]]
+    rows = committed_rows("sapiv-distortion")
     out = {r.id: r for r in classify_rows(STUDY, rows)}
     assert STUDY.kinds is KINDS and STUDY.inputs_from_paper is INPUTS_FROM_PAPER
     assert unused_kinds(STUDY, rows) == []
