@@ -97,6 +97,15 @@ def _include(path: Path, *, heading_shift: bool = False, start_line: int = 0) ->
     return ["```{include} " + rel, *opts, "```", ""]
 
 
+def _include_report(path: Path) -> list[str]:
+    """A report one heading level down. A replication report opens with its physics-row tally,
+    then its title: here the title comes first, then the tally, then the rest of the report."""
+    lines = path.read_text(encoding="utf-8").splitlines()
+    if len(lines) > 2 and lines[2].startswith("# "):
+        return ["#" + lines[2], "", lines[0], "", *_include(path, heading_shift=True, start_line=3)]
+    return _include(path, heading_shift=True)
+
+
 def _replications_page() -> str:
     parts = ["# Replication reports", "",
              "Published results reproduced with mitpiv (`mitpiv replicate NAME`), each against the paper's "
@@ -106,14 +115,7 @@ def _replications_page() -> str:
     if not reports:
         parts += ["No replication report has been committed yet.", ""]
     for r in reports:
-        lines = r.read_text(encoding="utf-8").splitlines()
-        if len(lines) > 2 and lines[2].startswith("# "):
-            # the report opens with its physics-row tally, then its title: here the title comes
-            # first (one level down), then the tally, then the rest of the report
-            parts += ["#" + lines[2], "", lines[0], ""]
-            parts += _include(r, heading_shift=True, start_line=3)
-        else:
-            parts += _include(r, heading_shift=True)
+        parts += _include_report(r)
     return "\n".join(parts)
 
 
@@ -125,14 +127,7 @@ def _studies_page() -> str:
     if not reports:
         parts += ["No study report has been committed yet.", ""]
     for r in reports:
-        lines = r.read_text(encoding="utf-8").splitlines()
-        if len(lines) > 2 and lines[2].startswith("# "):
-            # the report opens with its physics-row tally, then its title: here the title comes
-            # first (one level down), then the tally, then the rest of the report
-            parts += ["#" + lines[2], "", lines[0], ""]
-            parts += _include(r, heading_shift=True, start_line=3)
-        else:
-            parts += _include(r, heading_shift=True)
+        parts += _include_report(r)
     return "\n".join(parts)
 
 
