@@ -26,12 +26,17 @@ from mitpiv.errors import ConfigError
 
 __all__ = ["Cost", "available_memory_bytes", "check_memory", "check_disk", "human_bytes", "human_seconds",
            "reconstruction_cost", "drt_mart_cost", "focal_stack_cost", "piv_cost", "piv_vectors", "particles_cost", "MEMORY_FRACTION",
-           "MAX_ITERATIONS"]
+           "MAX_ITERATIONS", "MAX_PLANES"]
 
 log = logging.getLogger(__name__)
 
 #: Most iterations a reconstruction takes (MART / SMART converge in 5-50; far more is a typo).
 MAX_ITERATIONS = 10_000
+
+#: Most planes a focal stack has: a light field resolves depth in tens to a few thousand
+#: planes (the benchmarks use up to 1000); far more is a typo (1e7 planes of even an 8 x 8
+#: light field are 2.4 GiB and most of an hour of work).
+MAX_PLANES = 100_000
 
 #: Share of the available memory a single array set may take before it is refused.
 MEMORY_FRACTION = 0.8
@@ -44,6 +49,9 @@ MEMORY_FRACTION = 0.8
 MART_VOXEL_CAMERA_PER_S = 3.5e7
 #: Refocusing: light-field samples (s, t, u, v) gathered per second per plane.
 REFOCUS_SAMPLES_PER_S = 2e8
+#: Refocusing: the fixed cost of a plane (its geometry and interpolation tables), measured
+#: 0.2-0.7 ms a plane on 8 x 8 px light fields (2 cores), where it is all of the time.
+REFOCUS_SECONDS_PER_PLANE = 2e-4
 #: 3D PIV: correlation-window voxels (FFT of (2w)^3 per vector) per second.
 PIV_VOXELS_PER_S = 2.5e9
 #: Seeding and advection: particles per second.
@@ -189,14 +197,20 @@ def drt_mart_cost(pixels: float, rays_per_pixel: int, slabs: int, *, iterations:
                       f"{int(slabs)} slabs) x {max(int(iterations), 1)} iteration(s)")
 
 
-def focal_stack_cost(n_planes: float, plane_shape, *, n_samples_per_plane: float | None = None) -> Cost:
-    """A focal stack streamed to disk: float32 planes on disk, one plane and its weights in
-    memory; time from the light-field samples gathered per plane."""
+def focal_stack_cost(n_planes: float, plane_shape, *, n_samples_per_plane: float | None = None,
+                     streamed: bool = True) -> Cost:
+    """A focal stack: streamed to disk (float32 planes on disk; in memory a block of 16
+    planes, one plane's weights and the plane depths), or with ``streamed=False`` held in
+    memory whole; time from the light-field samples gathered per plane and a fixed cost per
+    plane."""
     px = float(math.prod(plane_shape))
     n_planes = float(n_planes)
     samples = n_samples_per_plane if n_samples_per_plane is not None else px
-    return Cost(memory_bytes=16.0 * px, seconds=n_planes * samples / REFOCUS_SAMPLES_PER_S,
-                items=f"{_count(n_planes)} plane(s) of {_count(px)} px", disk_bytes=4.0 * px * n_planes)
+    stack = 4.0 * px * n_planes
+    work = 16.0 * px + 4.0 * px * min(n_planes, 16.0) + 16.0 * n_planes  # + depths and alphas (float64)
+    return Cost(memory_bytes=work + (0.0 if streamed else stack),
+                seconds=n_planes * (samples / REFOCUS_SAMPLES_PER_S + REFOCUS_SECONDS_PER_PLANE),
+                items=f"{_count(n_planes)} plane(s) of {_count(px)} px", disk_bytes=stack if streamed else 0.0)
 
 
 def piv_vectors(grid_shape, window, overlap: float) -> int:

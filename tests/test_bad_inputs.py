@@ -94,6 +94,7 @@ def files(tmp_path_factory) -> dict:
     exp = d / "exp"
     shutil.copytree(ROOT / "scenes" / "tomo4", exp, ignore=shutil.ignore_patterns("*.ply", "*.npz", "*.py", "*.md"))
     f["exp"] = str(exp / "experiment.toml")
+    (exp / "header_only.csv").write_text("x_mm,y_mm,z_mm\n")  # a particle list without particles
     f["exp_text"] = (exp / "experiment.toml").read_text()
     f["scene"] = str(exp / "scene.xml")
     # studies over it: a typo in a point key, in a scene parameter, a bad workers count
@@ -124,6 +125,7 @@ SENSOR = "sensor {img0} --out {out}"
 PIV = "piv {vol} {vol_b} --out {out}/f.npz"
 EVAL = "evaluate {vol} --truth {truth} --out {out}/m.json"
 RUN = "run {exp} --check"
+FLOW_RING = 'kind = "vortex_ring"\nring_radius_mm = 8.0\ncirculation_mm2_s = 2000.0\ncore_radius_mm = 2.0\n'
 
 CASES = [
     # --- seeds
@@ -134,6 +136,7 @@ CASES = [
     C("bench-seed-neg", "bench accuracy-time --out {out}/b --quick --seed -1", "--seed"),
     C("run-seed-neg", RUN + " --seed -1", "seed"),
     # --- --out is a file where a folder goes, or a folder where a file goes
+    C("render-define-frame", "render {scene} --out {out} --frames 0 -D frame=1", "-D frame"),
     C("render-out-file", "render {scene} --out {img0}", "--out"),
     C("sensor-out-file", "sensor {img0} --out {img1}", "--out"),
     C("reconstruct-out-dir", "reconstruct {img0} {img1} --out {out} --bounds 0 0.8 0 0.8 0 0.8 --voxel-mm 0.1",
@@ -144,6 +147,13 @@ CASES = [
     C("decode-out-dir", "decode {img0} --out {out}", "--out"),
     C("run-out-file", "run {exp} --out {img0}", "--out"),
     C("sweep-out-file", "sweep {exp} --out {img0}", "--out"),
+    # --- an output folder below a file (see also tests/test_out_under_file.py)
+    C("sensor-out-under-file", SENSOR.replace("{out}", "{img1}/sub") + " --peak-photons 100", "is a file"),
+    C("render-out-under-file", "render {scene} --out {img1}/sub", "is a file"),
+    C("run-out-under-file", "run {exp} --out {img1}/sub/run", "is a file"),
+    C("sweep-out-under-file", "sweep {exp} --out {img1}/sub", "is a file"),
+    C("export-out-under-file", "export {dir} --vtk --out {img1}/sub", "is a file"),
+    C("export-openlpt-under-file", "export {dir} --openlpt {img1}/sub", "is a file"),
     # --- sensor
     C("sensor-exposure-neg", SENSOR + " --exposure -1", "exposure"),
     C("sensor-exposure-nan", SENSOR + " --exposure nan", "exposure"),
@@ -157,6 +167,7 @@ CASES = [
     C("refocus-neg-planes", "refocus {img0} --out {out}/s.npy --z-range -1 1 -3", "--z-range"),
     C("refocus-frac-planes", "refocus {img0} --out {out}/s.npy --z-range -1 1 2.5", "--z-range"),
     C("refocus-zero-planes", "refocus {img0} --out {out}/s.npy --z-range -1 1 0", "--z-range"),
+    C("refocus-zero-span", "refocus {img0} --out {out}/s.npy --z-range 0 0 5", "--z-range"),
     C("refocus-nan-z", "refocus {img0} --out {out}/s.npy --z nan", "--z"),
     C("refocus-huge-planes", "refocus {lf} --out {out}/s.npy --z-range -1 1 1e12", "planes"),
     C("refocus-lf-out-npz", "refocus {lf} --out {out}/s.npz --z 0", "--out"),
@@ -192,6 +203,7 @@ CASES = [
       "--voxel-mm 0.1,0.1", "--voxel-mm"),
     C("reconstruct-method", RECON + " --method marts", "--method"),
     C("reconstruct-mu", RECON.replace("{img1}", "") + " --mu 2.5", "--mu"),
+    C("reconstruct-min-coverage-mart", RECON + " --method mart --min-coverage 0.5", "--min-coverage"),
     C("reconstruct-rays", RECON.replace("{img1}", "") + " --rays-per-pixel 0", "--rays-per-pixel"),
     C("reconstruct-frame-neg", RECON.replace("{img1}", "") + " --truth {truth} --frame -1", "--frame"),
     C("reconstruct-frame-big", RECON.replace("{img1}", "") + " --truth {truth} --frame 7", "--frame"),
@@ -235,6 +247,7 @@ CASES = [
     C("decode-no-camera", "decode {dir}/text.exr --out {out}/lf.npz", "text.exr"),
     C("decode-oversample", "decode {img0} --out {out}/lf.npz --angular-oversample 0", "--angular-oversample"),
     C("info-empty", "info {dir}/empty.exr", "empty.exr"),
+    C("info-folder", "info {dir}", "is a folder"),
     # --- sweep
     C("sweep-workers-neg", "sweep {exp} --out {out}/s --workers -1", "--workers"),
     C("sweep-workers-zero", "sweep {exp} --out {out}/s --workers 0", "--workers"),
@@ -284,6 +297,20 @@ CASES = [
     C("toml-inf", RUN + " --set seeding.diameter_um=inf", "diameter_um"),
     C("toml-center-nan", RUN + " --set flow.center=[nan,0.0,0.0]", "center"),
     C("toml-proxy-bigger-than-box", RUN + " --set seeding.proxy_radius_mm=50.0", "proxy_radius_mm"),
+    # checks that need the tables' values, before anything renders
+    C("toml-count-zero", RUN + " --set seeding.count=0", "count"),
+    C("toml-file-no-particles", RUN, "header_only.csv", [("count = 12000", 'file = "header_only.csv"')]),
+    C("toml-windows-bigger-than-volume", RUN + " --set piv.windows=[128]", "windows"),
+    C("toml-core-radius-zero", RUN + " --set flow.core_radius_mm=0.0", "core_radius_mm"),
+    C("toml-axis-zero", RUN + " --set flow.axis=[0.0,0.0,0.0]", "axis"),
+    C("toml-segments-zero", RUN + " --set flow.segments=0", "segments"),
+    C("toml-modes-negative", RUN, "modes", [(FLOW_RING, 'kind = "near_field_jet"\nmodes = -5\n'),
+                                             ("center = [0.0, -4.0, 0.0]\naxis = [0.0, 1.0, 0.0]\n", "")]),
+    C("toml-grid-flow-missing", RUN, "nothere_flow.npz", [(FLOW_RING, 'kind = "grid"\npath = "nothere_flow.npz"\n'),
+                                                          ("center = [0.0, -4.0, 0.0]\naxis = [0.0, 1.0, 0.0]\n", "")]),
+    C("toml-8bit-noise-no-exposure", RUN + " --set sensor.bit_depth=8 --set sensor.gaussian_noise_percent=5.0",
+      "exposure"),
+    C("toml-name-empty", RUN, "name", [('name = "tomo4"', 'name = ""')]),
     C("toml-set-noeq", "run {exp} --check --set reconstruction.iterations", "--set"),
     C("toml-missing-file", "run {dir}/nothere.toml --check", "nothere.toml"),
     C("toml-not-toml", "run {img0} --check", "cam0_frame000.exr"),
@@ -387,8 +414,11 @@ def test_shot_noise_saturates_instead_of_overflowing(files, tmp_path, capsys):
     assert np.all(counts[2:5, 2:5] == 20000) and counts[0, 0] == 0 and counts[6, 6] == 0
     counts = apply_sensor(img, SensorModel(exposure=1e25, shot_noise=True, bit_depth=12), seed=3)
     assert np.all(counts[2:5, 2:5] == 4095)  # no full well: the ADC clips
-    assert main(["sensor", files["img0"], "--out", str(tmp_path), "--exposure", "1e25", "--shot-noise",
-                 "--full-well", "20000", "--bit-depth", "16", "--format", "exr"]) == 0
+    from mitpiv.errors import MitpivWarning
+
+    with pytest.warns(MitpivWarning, match=r"1\.6 % of the pixels reach the full well"):  # the particle's 9 of 576
+        assert main(["sensor", files["img0"], "--out", str(tmp_path), "--exposure", "1e25", "--shot-noise",
+                     "--full-well", "20000", "--bit-depth", "16", "--format", "exr"]) == 0
     out, _ = read_exr(tmp_path / "cam0_frame000.exr")
     assert out.max() == 20000 and "Traceback" not in capsys.readouterr().err
 
@@ -479,8 +509,10 @@ FILM = {"type": "hdrfilm", "width": 16, "height": 16, "pixel_format": "luminance
       "mla_pitch_um": 55.0, "mla_offset_x_um": 5000.0,
       "film": FILM | {"width": 160, "height": 160, "rfilter": {"type": "box"}}},
      "'mla_offset_um' .* moves the MLA centre off the sensor"),
+    ({"type": "distorted_pinhole", "focal_length_mm": 50.0, "pixel_pitch_um": 10.0, "f_number": 4.0,
+      "focus_distance_mm": 50.0, "film": FILM}, "'focus_distance_mm' = 50 mm .* focal length"),
 ], ids=["pinhole-principal-point-nan", "pinhole-k1-inf", "mie-absorption-1000", "mie-diameter-nan",
-        "plenoptic-mla-offset"])
+        "plenoptic-mla-offset", "thin-lens-focus-at-focal-length"])
 def test_plugin_parameters_are_checked(plugin, match):
     from mitpiv.errors import ConfigError
     from mitpiv.render.scene import load_dict
@@ -542,7 +574,7 @@ SCHEMA_FIELDS = {
     "particles.radius_voxels": (float, 0, None, True, False),
     "flow.dt_s": (float, 0, None, True, False),
     "seeding.diameter_um": (float, 0, None, True, False),
-    "seeding.count": (int, 0, None, False, False),
+    "seeding.count": (int, 0, None, True, False),  # count = 0: no particles to render
     "seed": (int, 0, 2**63 - 1, False, False),
 }
 

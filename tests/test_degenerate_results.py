@@ -74,7 +74,7 @@ def test_metrics_without_a_value_are_null_with_a_reason():
     assert "Q n/a" in text and "empty volume" in text and "nan" not in text.lower()
 
 
-def test_experiment_with_8_bit_noise_and_no_exposure_stops_at_the_sensor_stage(tmp_path):
+def test_experiment_with_8_bit_noise_and_no_exposure_is_refused_before_rendering(tmp_path):
     """The issue's case: 8-bit output and 5 % noise without an exposure used to round every
     image to 0 and end with Q 0.000 and a NaN PIV error, exit 0."""
     from pathlib import Path
@@ -101,13 +101,16 @@ sensors = ["cam0", "cam1"]
 [reconstruction]
 bounds_mm = [-3.0, 3.0, -3.0, 3.0, -1.0, 1.0]
 voxel_mm = 0.2
+[piv]
+windows = [8]
 [sensor]
 bit_depth = 8
 gaussian_noise_percent = 5.0
 """)
-    with pytest.raises(ConfigError, match="no particle signal.*exposure"):
+    # refused when the experiment is validated (mitpiv run --check), before anything renders
+    with pytest.raises(ConfigError, match="bit_depth = 8 with noise .*no 'exposure', 'peak_photons' or 'illumination_time_s'"):
         run_config(load_experiment(exp), tmp_path / "run", until="sensor")
-    assert not list((tmp_path / "run" / "sensor").glob("*.exr"))
+    assert not (tmp_path / "run").exists()
 
 
 def test_an_empty_volume_has_null_quality_not_zero(tmp_path):
@@ -136,6 +139,8 @@ dt_s = 0.002
 [reconstruction]
 bounds_mm = [-1.0, 1.0, -1.0, 1.0, -1.0, 1.0]
 voxel_mm = 0.2
+[piv]
+windows = [8]
 """)
     cfg = load_experiment(exp)
     grid = grid_of(cfg)

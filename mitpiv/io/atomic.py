@@ -11,10 +11,17 @@ lock is an OS file lock (``flock`` through the kept library filelock) on ``.mitp
 released by the OS when the holder dies, so a killed run never leaves a stale lock; who
 holds it (PID, host, start time, command) is in ``.mitpiv.lock.owner``.
 
-Temporary names: a file ``x.npz`` is written as ``.x.npz.tmp-<random>.npz`` (the random
-part from :func:`tempfile.mkstemp`); a runner's stage folder ``s`` is filled as ``.s.tmp``
-(and an old one moved aside as ``.s.old``). :func:`clean_temps` removes exactly these
-patterns (and the names of earlier versions, ``.x.npz.<8 random>.npz``).
+Temporary names carry mitpiv's tag, so that they are recognisable as ours beyond doubt: a
+file ``x.npz`` is written as ``.x.npz.mitpiv-tmp-<8 random>.npz`` (the random part from
+:func:`tempfile.mkstemp`); a runner's stage folder ``s`` is filled as
+``.s.mitpiv-tmp-<token>`` (and an old one moved aside as ``.s.mitpiv-old-<token>``), where
+``<token>`` is the lock identity of the run that made it (12 hex digits, a fresh random one
+each time a folder's lock is taken, recorded in the owner record; :func:`temp_dir`).
+:func:`clean_temps` removes exactly these: files of the file shape, folders of the folder
+shape. Everything else is left alone: every other hidden name (a user's
+``.config.settings.json``, ``.notes.old_2024.txt``, ``.cache.old/`` ..., and the untagged
+names of earlier mitpiv versions, ``.s.tmp``, ``.x.npz.tmp-<random>.npz``), a link, a file
+of the folder shape or a folder of the file shape, and the current holder's own folders.
 """
 
 from __future__ import annotations
@@ -24,6 +31,7 @@ import json
 import logging
 import os
 import re
+import secrets
 import shutil
 import socket
 import sys
@@ -34,13 +42,13 @@ from pathlib import Path
 
 from mitpiv.errors import DiskSpaceError, FolderLockedError
 
-__all__ = ["atomic_path", "fsync_dir", "check_free_space", "clean_temps", "folder_lock", "lock_holder", "TMP_MARK",
-           "LOCK_NAME", "DiskSpaceError", "FolderLockedError"]
+__all__ = ["atomic_path", "fsync_dir", "check_free_space", "clean_temps", "folder_lock", "lock_holder", "temp_dir",
+           "TMP_MARK", "LOCK_NAME", "DiskSpaceError", "FolderLockedError"]
 
 log = logging.getLogger(__name__)
 
-#: Part of every temporary file name (``.<name>.tmp-<random><suffix>``).
-TMP_MARK = ".tmp-"
+#: Part of every temporary file name (``.<name>.mitpiv-tmp-<random><suffix>``).
+TMP_MARK = ".mitpiv-tmp-"
 
 #: The lock file of a locked folder, and the record of who holds it.
 LOCK_NAME = ".mitpiv.lock"
@@ -49,10 +57,10 @@ _OWNER_NAME = ".mitpiv.lock.owner"
 #: Free space kept in reserve beyond a write's estimate [bytes].
 RESERVE_BYTES = 64 * 2**20
 
-# temporary files of this module (and of earlier versions: mkstemp's 8 random characters)
-_TMP_FILE = re.compile(r"^\..+(\.tmp-[A-Za-z0-9_]+.*|\.[a-z0-9_]{8}\.[A-Za-z0-9]{1,8})$")
-# a runner's stage folders being filled (.<stage>.tmp) or moved aside (.<stage>.old)
-_TMP_DIR = re.compile(r"^\..+\.(tmp|old)$")
+# temporary files of atomic_path: the tag, mkstemp's 8 random characters, one suffix
+_TMP_FILE = re.compile(r"^\..+\.mitpiv-tmp-[a-z0-9_]{8}(\.[A-Za-z0-9_-]{1,16})?$")
+# a runner's stage folders being filled (-tmp-) or moved aside (-old-), with the lock token
+_TMP_DIR = re.compile(r"^\..+\.mitpiv-(tmp|old)-(?P<token>[0-9a-f]{12})$")
 
 
 def fsync_dir(path) -> None:
@@ -150,13 +158,16 @@ def _fsync_file(path) -> None:
         os.close(fd)
 
 
-def clean_temps(folder, *, recursive: bool = False) -> list[Path]:
-    """Remove the temporary files and stage folders that an interrupted write or run left
-    in ``folder`` (see the module notes for the names); returns what was removed.
+def clean_temps(folder, *, recursive: bool = False, token: str | None = None) -> list[Path]:
+    """Remove the temporary files and stage folders that an interrupted mitpiv write or run
+    left in ``folder`` (only names of mitpiv's own shapes, see the module notes: a user's
+    hidden files are never touched); returns what was removed.
 
     Call it only while no other process writes there (the runner holds the run folder's
     lock). recursive : also look in every sub-folder (not inside removed ones); off by
     default, so that a run folder given as a large existing folder is not walked whole.
+    token : the lock token of the current holder (what :func:`folder_lock` yields): its own
+        temporary folders are kept.
     """
     folder = Path(folder)
     removed: list[Path] = []
@@ -165,12 +176,13 @@ def clean_temps(folder, *, recursive: bool = False) -> list[Path]:
     for root, dirs, files in os.walk(folder):
         r = Path(root)
         for d in list(dirs):
-            if _TMP_DIR.match(d):
+            m = _TMP_DIR.match(d)
+            if m and m["token"] != token and not (r / d).is_symlink():
                 shutil.rmtree(r / d, ignore_errors=True)
                 removed.append(r / d)
                 dirs.remove(d)
         for f in files:
-            if _TMP_FILE.match(f):
+            if _TMP_FILE.match(f) and not (r / f).is_symlink():
                 try:
                     (r / f).unlink()
                     removed.append(r / f)
@@ -183,9 +195,23 @@ def clean_temps(folder, *, recursive: bool = False) -> list[Path]:
     return removed
 
 
-# (folder, thread) -> nesting depth: a run inside a sweep point or run_config around
-# run_stages takes the lock it already holds again without blocking itself
-_HELD: dict[tuple[str, int], int] = {}
+# (folder, thread) -> [nesting depth, lock token]: a run inside a sweep point or run_config
+# around run_stages takes the lock it already holds again without blocking itself
+_HELD: dict[tuple[str, int], list] = {}
+
+
+def temp_dir(folder, name: str, kind: str = "tmp") -> Path:
+    """The temporary folder ``.<name>.mitpiv-<kind>-<token>`` in ``folder``, whose lock this
+    thread must hold (``token``: the lock's, see :func:`folder_lock`): where a stage folder
+    ``name`` is filled (kind ``"tmp"``) or an old one is moved aside (``"old"``). It is
+    named for this holder alone, so it is never a user's, and :func:`clean_temps` of a later
+    run removes it if this one dies."""
+    folder = Path(folder)
+    held = _HELD.get((str(folder.resolve()), threading.get_ident()))
+    if held is None or kind not in ("tmp", "old"):
+        raise ValueError(f"temp_dir({str(folder)!r}, {name!r}, {kind!r}): call it inside folder_lock of that "
+                         "folder, with kind 'tmp' or 'old'.")
+    return folder / f".{name}.mitpiv-{kind}-{held[1]}"
 
 
 def lock_holder(folder) -> str:
@@ -200,7 +226,10 @@ def lock_holder(folder) -> str:
 
 @contextmanager
 def folder_lock(folder, *, what: str = "run folder"):
-    """Hold the exclusive lock of ``folder`` (created if missing) for the ``with`` block.
+    """Hold the exclusive lock of ``folder`` (created if missing) for the ``with`` block;
+    yields the lock token (12 random hex digits, new each time the lock is taken, the same
+    for nested calls; in the owner record) that names this holder's temporary folders
+    (:func:`temp_dir`).
 
     Raises :class:`FolderLockedError` at once (no waiting) when another process, or another
     thread of this one, holds it: the message names the holder's PID, host, start time and
@@ -209,14 +238,22 @@ def folder_lock(folder, *, what: str = "run folder"):
     from filelock import FileLock, Timeout
 
     folder = Path(folder)
+    for p in (folder, *folder.parents):
+        if p.is_dir():
+            break
+        if p.exists():
+            from mitpiv.errors import ConfigError
+
+            raise ConfigError(f"{what} {str(folder)!r}: {str(p)!r} is a file, not a folder; give another "
+                              f"folder, or move that file away.")
     folder.mkdir(parents=True, exist_ok=True)
     key = (str(folder.resolve()), threading.get_ident())
     if key in _HELD:
-        _HELD[key] += 1
+        _HELD[key][0] += 1
         try:
-            yield
+            yield _HELD[key][1]
         finally:
-            _HELD[key] -= 1
+            _HELD[key][0] -= 1
         return
     lock = FileLock(str(folder / LOCK_NAME), timeout=0)
     try:
@@ -226,13 +263,14 @@ def folder_lock(folder, *, what: str = "run folder"):
             f"{what} {str(folder)!r} is locked by {lock_holder(folder)}: another mitpiv process is writing "
             f"there. Wait for it to finish (or stop it), or give another output folder.") from None
     try:
-        owner = {"pid": os.getpid(), "host": socket.gethostname(),
+        token = secrets.token_hex(6)
+        owner = {"pid": os.getpid(), "host": socket.gethostname(), "token": token,
                  "started": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
                  "command": [Path(sys.argv[0]).name] + sys.argv[1:] if sys.argv and sys.argv[0] else []}
         with atomic_path(folder / _OWNER_NAME, suffix=".json") as tmp:
             tmp.write_text(json.dumps(owner))
-        _HELD[key] = 1
-        yield
+        _HELD[key] = [1, token]
+        yield token
     finally:
         _HELD.pop(key, None)
         try:

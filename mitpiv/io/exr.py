@@ -65,6 +65,9 @@ def write_exr(path, image, metadata: dict | None = None) -> Path:
 
 
 def _check_exr(path: Path, owner: str) -> None:
+    if path.is_dir():
+        raise FileFormatError(f"{owner}: {str(path)!r} is a folder, not an EXR file; give one of its .exr files, e.g. "
+                              f"{str(path / 'cam0_frame000.exr')!r}.")
     if not path.is_file():
         raise FileFormatError(f"{owner}: {str(path)!r} does not exist.")
     with open(path, "rb") as fh:

@@ -294,7 +294,7 @@ def read_particles_csv(path, *, diameter_um: float | None = None, length_unit_mm
                               f"z); its header is {header}.")
     try:
         data = np.loadtxt(lines[1:], delimiter=",", ndmin=2, dtype=np.float64,
-                          usecols=[cols[k] for k in "xyzd" if cols[k] is not None])
+                          usecols=[cols[k] for k in "xyzd" if cols[k] is not None]) if lines[1:] else np.zeros((0, 0))
     except ValueError as e:
         raise FileFormatError(f"read_particles_csv: {str(path)!r} has a non-numeric value ({e}).") from None
     if data.size == 0:

@@ -206,6 +206,31 @@ def _kernels():
     return _KERNELS
 
 
+def _check_stack_size(what: str, n_planes: int, plane_shape, n_views: int, out, *, cap: bool) -> None:
+    """Refuse a stack before anything is allocated or written: more than
+    :data:`~mitpiv.costs.MAX_PLANES` planes (``cap``), more memory than is available (in
+    memory) or more disk than is free beside ``out`` (streamed); the estimate is logged
+    (debug: the CLI logs its own)."""
+    from pathlib import Path
+
+    from mitpiv import costs
+
+    px = math.prod(plane_shape)
+    cost = costs.focal_stack_cost(n_planes, plane_shape, n_samples_per_plane=float(px * n_views),
+                                  streamed=out is not None)
+    if cap and n_planes > costs.MAX_PLANES:
+        raise ConfigError(f"{what}: z_mm has {costs._count(n_planes)} planes, more than the {costs.MAX_PLANES} a focal "
+                          f"stack may have ({cost}); a light field resolves depth in tens to a few thousand planes: "
+                          f"give fewer planes.")
+    label = f"{what}: z_mm of {costs._count(n_planes)} planes"
+    if out is None:
+        costs.check_memory(cost, what=label, fix="give fewer planes, or give out='stack.npy' to stream it to disk",
+                           quiet=True)
+    else:
+        costs.check_memory(cost, what=label, fix="give fewer planes", quiet=True)
+        costs.check_disk(cost, Path(out).parent, what=label, fix="give fewer planes, or write 'out' to a larger disk")
+
+
 def _check_method(method):
     if method not in METHODS:
         raise ConfigError(f"refocus: 'method' must be one of {METHODS}, got {method!r}.")
@@ -324,6 +349,8 @@ def focal_stack(lf: LightField, z_mm, *, method: str = "additive", magnification
     z = np.atleast_1d(np.asarray(z_mm, dtype=np.float64))
     if z.ndim != 1 or len(z) == 0:
         raise ConfigError(f"focal_stack: 'z_mm' must be a non-empty 1D sequence, got shape {z.shape}.")
+    _check_stack_size("focal_stack", len(z), (len(lf.t_px), len(lf.s_px)), lf.data.shape[0] * lf.data.shape[1], out,
+                      cap=True)
     alphas = alpha_from_z(z, focal_length_mm=o.focal_length_mm, magnification=o.magnification)
     w = _weights(lf, weights)
     shape = (len(z), len(lf.t_px), len(lf.s_px))
@@ -377,6 +404,9 @@ def refocus_volume(lf: LightField, x_mm, y_mm, z_mm, *, method: str = "additive"
     _check_method(method)
     o = lf._need_optics("refocus_volume")
     xs, ys, zs = (np.atleast_1d(np.asarray(a, dtype=np.float64)) for a in (x_mm, y_mm, z_mm))
+    # a voxel grid's planes are not capped by MAX_PLANES: its memory (or disk) bounds it
+    _check_stack_size("refocus_volume", len(zs), (len(ys), len(xs)), lf.data.shape[0] * lf.data.shape[1], out,
+                      cap=False)
     w = _weights(lf, weights)
     shape = (len(zs), len(ys), len(xs))
     ds, dt = grid_steps(lf)

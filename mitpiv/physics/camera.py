@@ -173,6 +173,12 @@ class PinholeCamera:
             if self.focus_distance_mm is None:
                 raise ConfigError("camera: 'focus_distance_mm' is required with 'f_number'.")
             self.focus_distance_mm = check_positive("focus_distance_mm", self.focus_distance_mm, owner="camera", unit="mm")
+            if self.focus_distance_mm <= self.focal_length_mm:
+                raise ConfigError(
+                    f"camera: 'focus_distance_mm' = {self.focus_distance_mm:g} mm is not beyond the focal length "
+                    f"({self.focal_length_mm:g} mm): a thin lens forms a real image only of objects farther than f "
+                    f"(1/s + 1/s' = 1/f), so this camera would render black. Focus farther than the focal length "
+                    f"(e.g. the distance to the volume).")
         elif self.focus_distance_mm is not None:
             raise ConfigError("camera: 'focus_distance_mm' needs 'f_number' (a thin-lens aperture).")
 

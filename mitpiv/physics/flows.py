@@ -209,6 +209,9 @@ class VortexRing(_Axisymmetric):
             big_r, a = self.ring_radius_mm, self.core_radius_mm
             speed_mm_s = self.circulation_mm2_s / (4 * math.pi * big_r) * (math.log(8 * big_r / a) - 0.25)
         self.speed_mm_s = float(speed_mm_s)
+        if isinstance(segments, bool) or int(segments) != segments or segments < 1:
+            raise ConfigError(f"VortexRing: 'segments' (pieces of the ring filament) must be a whole number >= 1, got "
+                              f"{segments!r}; use e.g. 256 (the default).")
         self.segments = int(segments)
         # Ring frame: two unit vectors orthogonal to the axis.
         helper = np.array([1.0, 0, 0]) if abs(self.axis[0]) < 0.9 else np.array([0, 1.0, 0])

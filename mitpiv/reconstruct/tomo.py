@@ -742,7 +742,19 @@ def mart(images, mappings, grid: VoxelGrid, *, iterations: int = 5, mu: float = 
     (n_z, n_y, n_x) float32 volume, or ``(volume, info)``
     """
     what = "smart" if smart else "mart"
+    for i, im in enumerate([images] if isinstance(images, np.ndarray) and images.ndim == 2 else images):
+        if np.any(np.asarray(im) < 0):
+            a = np.asarray(im)
+            raise ConfigError(f"{what}: images[{i}] has {int(np.sum(a < 0))} negative pixel(s) (min {a.min():.4g}); "
+                              f"MART multiplies each voxel by measured / projected intensity, which a negative "
+                              f"intensity makes meaningless. Clip the image at 0 (np.maximum(image, 0)) or subtract "
+                              f"less background first.")
     imgs, maps = _check_images(images, mappings, grid, what)
+    if len(imgs) == 1:
+        warnings.warn(f"{what}: one camera: MART with one view cannot resolve depth (every voxel on a pixel's line of "
+                      f"sight gets the same update, so particles smear along the viewing direction); use two or more "
+                      f"cameras, or method 'drt-mart' / 'plenoptic' for a light-field camera.", MitpivWarning,
+                      stacklevel=2)
     check_iterations(what, iterations, mu)
     _check_choice(what, "interpolation", interpolation, INTERPOLATIONS)
     _check_choice(what, "residuals", residuals, RESIDUALS)

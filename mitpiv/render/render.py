@@ -258,6 +258,11 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
     frames = [int(f) for f in frames]
     if not frames:
         raise ConfigError("render_scene: 'frames' must name at least one frame.")
+    if "frame" in params:
+        raise ConfigError(f"render_scene: params 'frame' = {params['frame']!r} (mitpiv render -D frame=...): $frame is "
+                          f"set for each rendered frame from 'frames' ({frames}), so it would be ignored while the "
+                          f"files' metadata name the frames rendered; give frames=[{params['frame']}] (mitpiv render "
+                          f"--frames {params['frame']}) instead.")
     if spp is not None and (int(spp) != spp or spp < 1):
         raise ConfigError(f"render_scene: 'spp' must be a positive integer, got {spp!r}.")
     seed = check_seed(seed)

@@ -194,6 +194,10 @@ def load_scene(xml_path, *, frame: int = 0, params: dict | None = None):
             ply = read_particles_ply(pf)
         except FileFormatError as e:
             raise ConfigError(f"frame {frame}: {e}") from None
+        if len(ply["positions_mm"]) == 0:
+            raise ConfigError(f"frame {frame}: particle file {str(pf)!r} holds no particles (element vertex 0); the "
+                              f"renderer cannot load an empty particle set. Write at least one particle "
+                              f"(write_particles_ply) or remove the particle shape from the scene.")
         _check_proxy(ply, pf)
     try:
         scene = mi.load_file(str(xml_path), optimize=False, **values)  # no sensor merging (module docstring)

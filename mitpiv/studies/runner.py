@@ -3,7 +3,7 @@ runs), then runs its kind's stages into a run folder, each stage completed atomi
 skipped on a rerun when its inputs did not change.
 
 A run folder holds ``experiment.json`` (the validated experiment), one sub-folder per stage
-(filled in ``.<stage>.tmp`` and renamed into place with its completion record
+(filled in ``.<stage>.mitpiv-tmp-<lock token>`` and renamed into place with its completion record
 ``stage.json``: the stage key, its wall time, its result and every output file with its
 SHA-256 and size), and at the end ``metrics.json`` (the kind's summary) and
 ``timings.json`` (seconds per stage), each written once and atomically.
@@ -22,7 +22,8 @@ them is there with its checksum: a stage folder with a missing or corrupt output
 One run at a time: the run folder is locked for the whole run
 (:func:`mitpiv.io.atomic.folder_lock`); a second run on it fails at once naming the PID,
 host and start time of the holder. Temporary files and stage folders that an interrupted
-run left behind are removed when the next run starts (under the lock).
+run left behind are removed when the next run starts (under the lock): only names of
+mitpiv's own shapes (:mod:`mitpiv.io.atomic`), never a user's hidden files.
 
 Timings are kept in memory and written once; a skipped stage reports the time it took when
 it ran.
@@ -125,8 +126,22 @@ def load_experiment(path, overrides: Mapping | None = None) -> BaseModel:
 
 
 def check_experiment(path, overrides: Mapping | None = None) -> BaseModel:
-    """Validate an experiment without running it (``mitpiv run --check``)."""
-    return load_experiment(path, overrides)
+    """Validate an experiment without running it (``mitpiv run --check``): its tables, and
+    every stage's own check (:func:`preflight`) for a whole run."""
+    from mitpiv.studies.kinds import get_kind
+
+    cfg = load_experiment(path, overrides)
+    preflight(cfg, get_kind(cfg.kind).stages(cfg))
+    return cfg
+
+
+def preflight(cfg: BaseModel, stages) -> None:
+    """Run the ``check`` of every stage about to run (:class:`~mitpiv.studies.shared.Stage`),
+    before the first of them starts: what a stage cannot do is refused before anything is
+    rendered."""
+    for s in stages:
+        if s.check is not None:
+            s.check(cfg)
 
 
 # ------------------------------------------------------------------------------ stages
@@ -245,13 +260,14 @@ def _verified(stage_dir: Path, key: str, name: str, run_name: str) -> dict | Non
     return rec
 
 
-def _clean(run: Path, stages: list[Stage]) -> None:
-    """Remove what an interrupted run left: temporary stage folders and files."""
+def _clean(run: Path, stages: list[Stage], token: str) -> None:
+    """Remove what an interrupted run left: temporary stage folders and files (not those of
+    the current holder, ``token``)."""
     from mitpiv.io.atomic import clean_temps
 
-    clean_temps(run)
+    clean_temps(run, token=token)
     for st in stages:
-        clean_temps(run / st.name)
+        clean_temps(run / st.name, token=token)
 
 
 def run_stages(cfg: BaseModel, run_dir, stages: list[Stage], *, progress: Progress = None
@@ -263,13 +279,13 @@ def run_stages(cfg: BaseModel, run_dir, stages: list[Stage], *, progress: Progre
     ``run_dir``.
     """
     from mitpiv._alloc import retain_freed_memory
-    from mitpiv.io.atomic import folder_lock, fsync_dir
+    from mitpiv.io.atomic import folder_lock, fsync_dir, temp_dir
     from mitpiv.io.records import write_json
 
     retain_freed_memory()  # large temporaries reuse freed pages (mitpiv._alloc: demo 48.7 -> 41.0 s)
     run = Path(run_dir)
-    with folder_lock(run, what="run folder"):
-        _clean(run, stages)
+    with folder_lock(run, what="run folder") as token:
+        _clean(run, stages, token)
         data = cfg.model_dump(mode="json")
         write_json(run / "experiment.json", data)
         name = data.get("name", "experiment")
@@ -281,7 +297,7 @@ def run_stages(cfg: BaseModel, run_dir, stages: list[Stage], *, progress: Progre
         with bar(len(stages), desc=f"{name}", progress=progress, unit="stage") as b:
             for st in stages:
                 prev = content_hash({"prev": prev, **_static_part(cfg, data, st, cache), "upstream": upstream})
-                final, tmp = run / st.name, run / f".{st.name}.tmp"
+                final, tmp = run / st.name, temp_dir(run, st.name)
                 b.set_description(f"{name}: {st.name}")
                 rec = _verified(final, prev, st.name, name)
                 if rec is not None:
@@ -294,8 +310,7 @@ def run_stages(cfg: BaseModel, run_dir, stages: list[Stage], *, progress: Progre
                 log.info("[%s] %s ...", name, st.name)
                 for f in SUMMARY_FILES:  # an earlier run's summary no longer describes this folder
                     (run / f).unlink(missing_ok=True)
-                shutil.rmtree(tmp, ignore_errors=True)
-                tmp.mkdir(parents=True)
+                tmp.mkdir()  # named for this holder alone (its lock token): never there before
                 t0 = time.perf_counter()
                 try:
                     ctx = StageContext(cfg=cfg, run_dir=run, out=tmp, results=results, timings=timings,
@@ -309,7 +324,7 @@ def run_stages(cfg: BaseModel, run_dir, stages: list[Stage], *, progress: Progre
                 except BaseException:
                     shutil.rmtree(tmp, ignore_errors=True)
                     raise
-                old = run / f".{st.name}.old"
+                old = temp_dir(run, st.name, "old")
                 shutil.rmtree(old, ignore_errors=True)
                 if final.exists():
                     os.replace(final, old)
@@ -346,6 +361,7 @@ def run_config(cfg: BaseModel, out_dir, *, until: str | None = None, progress: P
             raise ConfigError(f"run: until={until!r} is not a stage of this {kind.name} experiment; its stages are "
                               f"{names}.")
         stages = stages[:names.index(until) + 1]
+    preflight(cfg, stages)
     from mitpiv.io.atomic import folder_lock
 
     with folder_lock(run, what="run folder"):

@@ -47,7 +47,7 @@ def read_toml(path, what: str = "experiment") -> dict:
     if not path.is_file():
         raise ConfigError(f"{what} file {str(path)!r} does not exist.")
     try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
+        return tomllib.loads(path.read_text(encoding="utf-8-sig"))  # -sig: a UTF-8 byte-order mark (Notepad's) is skipped
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{what} file {str(path)!r} is not valid TOML: {e}.") from None
     except UnicodeDecodeError as e:

@@ -20,6 +20,7 @@ It imports nothing of :mod:`mitpiv.studies` but the schema helpers.
 from __future__ import annotations
 
 import difflib
+import functools
 import re
 import shutil
 from collections.abc import Callable
@@ -63,6 +64,11 @@ class Stage:
     packages : tuple of str
         Installed packages whose version shapes the stage's output (part of its key), e.g.
         :data:`RENDER_PACKAGES` for a stage that renders.
+    check : callable or None
+        ``check(cfg)``: refuses (ConfigError) an experiment this stage cannot run, before
+        any stage of a run that includes it starts (and at ``mitpiv run --check``); for
+        checks that hold only when the stage runs (a PIV window against the grid of a run
+        stopped after the reconstruction is no error).
     """
 
     name: str
@@ -70,6 +76,7 @@ class Stage:
     run: Callable[[StageContext], dict | None]
     files: Callable[[BaseModel], list] | None = None
     packages: tuple[str, ...] = ()
+    check: Callable[[BaseModel], None] | None = None
 
 
 @dataclass
@@ -101,6 +108,9 @@ class Kind:
     headline: Callable[[dict], str] | None = None
     aliases: tuple[str, ...] = ()
     prepare: Callable[[dict, Path], dict] | None = None
+    #: The sweep-table columns ``row`` makes, as shell patterns (``"piv.*"``); a sweep checks
+    #: its ``[plot]`` names against them before any point runs. Empty: not declared (unchecked).
+    columns: tuple[str, ...] = ()
 
     @property
     def schema(self) -> type[BaseModel]:
@@ -143,9 +153,35 @@ def flow_union(prefix: str = "Flow", dt_description: str = "time between the two
     from mitpiv.physics.flows import FLOW_KINDS
 
     dt = (PosFloat, Field(..., description=dt_description))
-    models = {kind: model_from_signature(f"{prefix}_{kind}", cls, extra_fields={"dt_s": dt})
+    models = {kind: model_from_signature(f"{prefix}_{kind}", cls, extra_fields={"dt_s": dt}, base=_flow_base(cls))
               for kind, cls in FLOW_KINDS.items()}
     return discriminated(models)
+
+
+def _flow_base(cls) -> type[Table]:
+    """The base of a ``[flow]`` table: validating it builds the flow once, so that the flow's
+    own checks (a zero core radius or axis, too few modes or segments, a missing grid file)
+    refuse the experiment at ``--check`` rather than in the particles stage."""
+
+    class FlowTable(Table):
+        @model_validator(mode="after")
+        def _flow_checks(self):
+            import json
+
+            kw = {k: v for k, v in self.model_dump().items() if k not in ("kind", "dt_s")}
+            _build_flow(cls, json.dumps(kw, sort_keys=True))  # ConfigError: a ValueError
+            return self
+
+    return FlowTable
+
+
+@functools.lru_cache(maxsize=32)
+def _build_flow(cls, kwargs_json: str) -> None:
+    """Build a flow once per parameter set (a channel flow takes ~0.5 s; a sweep validates
+    every point, and a run validates again when it starts); errors are not cached."""
+    import json
+
+    cls(**json.loads(kwargs_json))
 
 
 # ------------------------------------------------------------------------------- the experiment's files

@@ -47,7 +47,7 @@ from pathlib import Path
 
 from mitpiv.errors import ConfigError, MitpivError
 from mitpiv.progress import Progress, bar
-from mitpiv.studies.runner import content_hash, experiment_key, load_experiment, run_config
+from mitpiv.studies.runner import content_hash, experiment_key, load_experiment, preflight, run_config
 from mitpiv.studies.schema import read_toml
 
 log = logging.getLogger(__name__)
@@ -99,8 +99,67 @@ def load_study(path, *, full: bool = False) -> dict:
         if not isinstance(st.get("full"), dict) or not st["full"]:
             raise ConfigError(f"study {path.name}: --full needs a [full] table of overrides for the full-size study.")
         points = [{**st["full"], **p} for p in points]
+    points = _unique_points(points, path.name)
     return {"name": st.get("name", path.stem), "experiment": exp, "points": points, "plot": st.get("plot"),
             "path": path, "workers": st.get("workers")}
+
+
+def _unique_points(points: list[dict], study_name: str) -> list[dict]:
+    """``points`` without repeats (the same overrides: the same point id, run and tabulated
+    once), with a warning naming each repeat."""
+    import warnings
+
+    from mitpiv.errors import MitpivWarning
+
+    first: dict[str, int] = {}
+    out = []
+    for i, p in enumerate(points):
+        pid = point_id(p)
+        if pid in first:
+            values = ", ".join(f"{k} = {v!r}" for k, v in p.items()) or "no overrides"
+            warnings.warn(f"study {study_name}: point {i + 1} ({values}) repeats point {first[pid] + 1}; it runs and "
+                          f"appears in the table once. Remove the duplicate (or give it another label).",
+                          MitpivWarning, stacklevel=3)
+            continue
+        first[pid] = i
+        out.append(p)
+    return out
+
+
+#: Columns every sweep table has besides the parameters (param.*) and the kind's results.
+SWEEP_COLUMNS = ("point", "status", "error", "traceback", "wall_s", "experiment_key", "ltpr_vs_nc*")
+
+
+def check_plot(st: dict, kind, study_name: str) -> None:
+    """The study's ``[plot]`` names (x, y, group) checked before any point runs: each must be
+    a parameter of the points ("param." optional), a column every sweep has, or one of the
+    kind's result columns (where the kind declares them, :attr:`Kind.columns`)."""
+    import difflib
+    from fnmatch import fnmatchcase
+
+    plot = st.get("plot")
+    if plot is None:
+        return
+    if not isinstance(plot, dict) or not {"x", "y"} <= set(plot) or set(plot) - {"x", "y", "group"}:
+        raise ConfigError(f"study {study_name}: [plot] must hold x and y (and optionally group), column names of the "
+                          f"results table, got {plot!r}.")
+    params = sorted({k for p in st["points"] for k in p})
+    patterns = (*SWEEP_COLUMNS, *kind.columns)
+    for role in ("x", "y", "group"):
+        name = plot.get(role)
+        if role == "group" and name is None:
+            continue
+        if not isinstance(name, str):
+            raise ConfigError(f"study {study_name}: [plot] {role} = {name!r} must be a column name (a string).")
+        bare = name.removeprefix("param.")
+        if bare in params or (not name.startswith("param.") and (not kind.columns or any(
+                fnmatchcase(name, pat) for pat in patterns))):
+            continue
+        close = difflib.get_close_matches(bare, params + [p for p in patterns if "*" not in p], n=1, cutoff=0.5)
+        hint = f"; did you mean {close[0]!r}?" if close else "."
+        raise ConfigError(f"study {study_name}: [plot] {role} = {name!r} is neither a parameter of the points "
+                          f"({', '.join(params) or 'none'}) nor a result column of kind {kind.name!r} "
+                          f"({', '.join(patterns)}){hint} Fix the name in [plot] (nothing was run).")
 
 
 def point_id(overrides: dict) -> str:
@@ -185,6 +244,9 @@ def run_sweep(path, out_dir, scheduler=None, *, workers: int | None = None, full
 
     st = load_study(path, full=full)
     keys = _validate_points(st, Path(path).name)
+    from mitpiv.studies.kinds import get_kind
+
+    check_plot(st, get_kind(read_toml(st["experiment"]).get("kind", "tomo")), Path(path).name)
     out = Path(out_dir)
     with folder_lock(out, what="sweep folder"):
         clean_temps(out)
@@ -246,10 +308,13 @@ def run_sweep(path, out_dir, scheduler=None, *, workers: int | None = None, full
 def _validate_points(st: dict, study_name: str) -> dict[str, str]:
     """Validate every point's experiment before any runs; one ConfigError lists every bad
     point. Returns each point's experiment key (by point id)."""
+    from mitpiv.studies.kinds import get_kind
+
     keys, errors = {}, []
     for ov in st["points"]:
         try:
             cfg = load_experiment(st["experiment"], {k: v for k, v in ov.items() if k != "label"})
+            preflight(cfg, get_kind(cfg.kind).stages(cfg))  # a point runs every stage
         except MitpivError as e:
             errors.append(f"point {ov}: {e}")
             continue

@@ -3,6 +3,7 @@ folder after it, the free-space check before a large write, byte-deterministic `
 files, the clean-up of an interrupted run's temporary files, and the folder lock that
 names its holder."""
 
+import json
 import os
 import socket
 import subprocess
@@ -72,17 +73,47 @@ def test_npz_files_depend_on_their_content_only(tmp_path, monkeypatch):
 
 
 def test_clean_temps_removes_only_temporary_files(tmp_path):
-    keep = ["metrics.json", ".mitpiv.lock", ".mitpiv.lock.owner", "render", ".hidden_user_file"]
-    drop = [".metrics.json.tmp-abc123.json", ".volume_0.npz.k2j3h4g5.npz", ".render.tmp", ".render.old"]
+    # only mitpiv's tagged names go: a user's hidden files of any temporary-looking shape
+    # (and the untagged names of earlier versions) stay, as do a file of the folder shape,
+    # a folder of the file shape and the current holder's own folder
+    dirs = ["render", ".render.tmp", ".render.old", ".cache.old", ".piv.mitpiv-tmp-0123456789ab",
+            ".piv.mitpiv-old-0123456789ab", ".x.npz.mitpiv-tmp-k2j3h4g5.npz.d", ".evaluate.mitpiv-tmp-ffffffffffff"]
+    keep = ["metrics.json", ".mitpiv.lock", ".mitpiv.lock.owner", "render", ".hidden_user_file", ".render.tmp",
+            ".render.old", ".cache.old", ".config.settings.json", ".notes.old_2024.txt", ".x.tmp",
+            ".metrics.json.tmp-abc123.json", ".volume_0.npz.k2j3h4g5.npz", ".a.mitpiv-tmp-0123456789ab",
+            ".x.npz.mitpiv-tmp-k2j3h4g5.npz.d", ".evaluate.mitpiv-tmp-ffffffffffff"]
+    drop = [".metrics.json.mitpiv-tmp-abc12_3x.json", ".volume_0.npz.mitpiv-tmp-k2j3h4g5.npz",
+            ".piv.mitpiv-tmp-0123456789ab", ".piv.mitpiv-old-0123456789ab"]
     for n in keep + drop:
-        if n in ("render", ".render.tmp", ".render.old"):
+        if n in dirs:
             (tmp_path / n).mkdir()
             (tmp_path / n / "x.exr").write_text("")
         else:
             (tmp_path / n).write_text("")
-    removed = clean_temps(tmp_path)
+    removed = clean_temps(tmp_path, token="ffffffffffff")
     assert sorted(p.name for p in removed) == sorted(drop)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(keep)
+
+
+def test_temporary_names_carry_the_tag_and_the_lock_token(tmp_path):
+    from mitpiv.io.atomic import temp_dir
+
+    with folder_lock(tmp_path) as token:
+        assert len(token) == 12 and int(token, 16) >= 0
+        with folder_lock(tmp_path) as again:  # a nested hold: the same token
+            assert again == token
+        assert json.loads((tmp_path / ".mitpiv.lock.owner").read_text())["token"] == token
+        assert temp_dir(tmp_path, "render").name == f".render.mitpiv-tmp-{token}"
+        assert temp_dir(tmp_path, "render", "old").name == f".render.mitpiv-old-{token}"
+        seen = []
+        with atomic_path(tmp_path / "a.json") as tmp:
+            seen.append(tmp.name)
+            tmp.write_text("{}")
+        assert seen[0].startswith(".a.json.mitpiv-tmp-") and seen[0].endswith(".json")
+    with folder_lock(tmp_path) as other:
+        assert other != token  # a new hold: a new token
+    with pytest.raises(ValueError, match="inside folder_lock"):
+        temp_dir(tmp_path, "render")
 
 
 def test_a_locked_folder_names_its_holder(tmp_path):

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -132,6 +133,13 @@ def wait_paused(proc: subprocess.Popen, *, timeout_s: float = 180.0) -> None:
             raise AssertionError("timed out waiting for the child to pause")
 
 
+def stage_temp(run: Path, stage: str) -> Path:
+    """The one temporary folder in which ``stage`` of the run in ``run`` is being filled
+    (``.<stage>.mitpiv-tmp-<lock token>``)."""
+    (p,) = Path(run).glob(f".{stage}.mitpiv-tmp-*")
+    return p
+
+
 def hidden_temps(run: Path) -> list[Path]:
     """Temporary stage folders and files anywhere in a run folder (the lock files excepted)."""
     return [p for p in Path(run).rglob(".*") if not p.name.startswith(".mitpiv.lock")]
@@ -152,8 +160,9 @@ def _strip(obj, run: Path):
     if isinstance(obj, str) and str(run) in obj:
         rel = obj.replace(str(run), "<run>")
         for part in Path(rel).parts:
-            if part.startswith(".") and part.endswith(".tmp"):
-                rel = rel.replace(part, part[1:-4])
+            m = re.fullmatch(r"\.(.+)\.mitpiv-tmp-[0-9a-f]{12}", part)
+            if m:
+                rel = rel.replace(part, m[1])
         return rel
     return obj
 

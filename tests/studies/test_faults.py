@@ -34,7 +34,7 @@ import pytest
 from mitpiv.cli import main
 from mitpiv.studies import run_experiment
 
-from .helpers import file_content, hidden_temps, stage_files, start_paused_run, tiny_experiment, wait_paused
+from .helpers import file_content, hidden_temps, stage_files, stage_temp, start_paused_run, tiny_experiment, wait_paused
 
 STAGES = ("particles", "render", "reconstruct", "evaluate", "piv", "report")
 
@@ -78,17 +78,17 @@ def test_kill_during_reconstruction_then_rerun_equals_an_uninterrupted_run(refer
     proc = start_paused_run("reconstruct", ["run", str(exp), "--out", str(run)])
     try:
         wait_paused(proc)
-        assert (run / ".reconstruct.tmp" / "volume_0.npz").is_file()
+        assert (stage_temp(run, "reconstruct") / "volume_0.npz").is_file()
         # a second run on the busy folder: one clear error naming the holder, nothing touched
         assert main(["run", str(exp), "--out", str(run)]) == 2
         err = capsys.readouterr().err
         assert f"is locked by PID {proc.pid} on host {socket.gethostname()} since " in err, err
-        assert (run / ".reconstruct.tmp" / "volume_0.npz").is_file() and not (run / "reconstruct").exists()
+        assert (stage_temp(run, "reconstruct") / "volume_0.npz").is_file() and not (run / "reconstruct").exists()
     finally:
         os.kill(proc.pid, signal.SIGKILL)
         proc.communicate()
     assert proc.returncode == -signal.SIGKILL
-    assert (run / ".reconstruct.tmp").is_dir() and not (run / "reconstruct").exists()  # SIGKILL: no clean-up
+    assert stage_temp(run, "reconstruct").is_dir() and not (run / "reconstruct").exists()  # SIGKILL: no clean-up
     assert main(["run", str(exp), "--out", str(run)]) == 0
     assert hidden_temps(run) == []  # the next start removed the killed run's temporary folder
     assert_same_run(run, ref)
@@ -102,7 +102,7 @@ def test_kill_during_piv_then_rerun_equals_an_uninterrupted_run(reference, tmp_p
     proc = start_paused_run("piv", ["run", str(exp), "--out", str(run)])
     try:
         wait_paused(proc)
-        assert (run / ".piv.tmp" / "field.npz").is_file()
+        assert (stage_temp(run, "piv") / "field.npz").is_file()
     finally:
         os.kill(proc.pid, sig)
         _, err = proc.communicate(timeout=60)
@@ -111,7 +111,7 @@ def test_kill_during_piv_then_rerun_equals_an_uninterrupted_run(reference, tmp_p
         assert proc.returncode == 143 and "stopped by SIGTERM" in err, err
         assert hidden_temps(run) == [] and "Traceback" not in err
     else:
-        assert proc.returncode == -signal.SIGKILL and (run / ".piv.tmp").is_dir()
+        assert proc.returncode == -signal.SIGKILL and stage_temp(run, "piv").is_dir()
     assert not (run / "piv").exists()
     assert main(["run", str(exp), "--out", str(run)]) == 0
     assert hidden_temps(run) == []
@@ -124,7 +124,7 @@ def test_kill_during_render_then_rerun(reference, tmp_path):
     proc = start_paused_run("render", ["run", str(exp), "--out", str(run)])
     try:
         wait_paused(proc)
-        assert len(list((run / ".render.tmp").glob("*.exr"))) == 1 and (run / "particles" / "stage.json").is_file()
+        assert len(list(stage_temp(run, "render").glob("*.exr"))) == 1 and (run / "particles" / "stage.json").is_file()
     finally:
         os.kill(proc.pid, signal.SIGKILL)
         proc.communicate()
@@ -167,7 +167,7 @@ def test_a_killed_worker_loses_and_duplicates_no_point(tmp_path):
     def killer(pids):
         t0 = time.monotonic()
         while time.monotonic() - t0 < 120:
-            if list(out.glob("points/*/.render.tmp")):
+            if list(out.glob("points/*/.render.mitpiv-tmp-*")):
                 for pid in pids:
                     os.kill(pid, signal.SIGKILL)
                 killed.extend(pids)

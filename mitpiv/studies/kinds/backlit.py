@@ -118,7 +118,8 @@ def schema():
 
     fields = {
         "kind": (Literal["backlit"], Field(..., description="experiment kind")),
-        "name": (str, Field(..., description="experiment name (default: the file name)")),
+        "name": (Annotated[str, Field(min_length=1)], Field(..., description="experiment name (default: the file "
+                                                                             "name)")),
         "seed": (Annotated[int, Field(ge=0, lt=2**63)], Field(0, description="experiment seed")),
         "camera": (CameraTable, Field(..., description="the plenoptic camera")),
         "field": (_field_union(), Field(..., description="the droplet field (kind and parameters) and dt_s")),
@@ -316,4 +317,5 @@ def headline(m: dict) -> str:
 
 
 KIND = Kind(name="backlit", build_schema=schema, stages=stages, summary=summary, row=row, headline=headline,
-            describe="backlit plenoptic droplet tracking")
+            describe="backlit plenoptic droplet tracking",
+            columns=("frame0.*", "frame1.*", "piv.*", "n_particles", "dewarp_rms_mm"))

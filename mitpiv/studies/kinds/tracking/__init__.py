@@ -263,7 +263,8 @@ def schema():
 
     fields = {
         "kind": (Literal["tracking"], Field("tracking", description="experiment kind")),
-        "name": (str, Field(..., description="experiment name (default: the file name)")),
+        "name": (Annotated[str, Field(min_length=1)], Field(..., description="experiment name (default: the file "
+                                                                             "name)")),
         "seed": (Annotated[int, Field(ge=0, lt=2**63)], Field(0, description="experiment seed")),
         "scene": (SceneTable, Field(..., description="the scene")),
         "seeding": (SeedingTable, Field(..., description="particle seeding")),
@@ -671,4 +672,5 @@ def headline(m: dict) -> str:
 
 
 KIND = Kind(name="tracking", build_schema=schema, stages=stages, summary=summary, row=row, prepare=prepare,
-            headline=headline, describe="time-resolved sequence, Shake-The-Box tracking and LPT Challenge metrics")
+            headline=headline, describe="time-resolved sequence, Shake-The-Box tracking and LPT Challenge metrics",
+            columns=(*METRIC_KEYS, "n_particles", "frames", "method", "openlpt.*", "tomo.*"))
