@@ -148,13 +148,21 @@ def _out_file(path, suffixes: tuple[str, ...], flag: str = "--out"):
 
 
 def _out_dir(path, flag: str = "--out"):
-    """``path`` as a Path when it is a folder or does not exist yet (not a file)."""
+    """``path`` as a Path when it is a folder or does not exist yet (not a file, and not below
+    one: ``--out f/sub`` with ``f`` a file is refused before any work)."""
     from pathlib import Path
 
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise MitpivError(f"{flag} {str(out)!r} is a file, not a folder; give a folder (it is created), "
                           f"e.g. {str(out.with_suffix(''))!r}.")
+    for parent in out.parents:
+        if parent.is_dir():
+            break
+        if parent.exists() or parent.is_symlink():
+            what = "a file" if parent.exists() else "a broken link"
+            raise MitpivError(f"{flag} {str(out)!r}: {str(parent)!r} is {what}, not a folder, so no folder can be "
+                              f"made below it; give another folder for {flag}, or move that file away.")
     return out
 
 
@@ -205,10 +213,18 @@ def cmd_render(args) -> int:
 
 
 def cmd_info(args) -> int:
+    import numpy as np
+
     from mitpiv.io import read_exr
 
     img, meta = read_exr(args.file)
-    print(f"{args.file}: {img.shape[1]}x{img.shape[0]} float32, min {img.min():.6g}, max {img.max():.6g}, sum {img.sum(dtype='float64'):.6g}")
+    nan = int(np.isnan(img).sum())
+    stats = img[~np.isnan(img)]
+    print(f"{args.file}: {img.shape[1]}x{img.shape[0]} float32, "
+          + (f"min {stats.min():.6g}, max {stats.max():.6g}, sum {stats.sum(dtype='float64'):.6g}" if stats.size else
+             "no finite pixel")
+          + (f"; {nan} NaN pixel(s) of {img.size} (min, max and sum leave them out: the file holds invalid "
+             f"values, which mitpiv's reconstruction refuses)" if nan else ""))
     print(json.dumps(meta, indent=2, sort_keys=True))
     return 0
 
@@ -218,10 +234,12 @@ def cmd_sensor(args) -> int:
 
     from mitpiv.imaging import SensorModel, apply_sensor_set
     from mitpiv.io.counts import write_counts
+    from mitpiv.photometry import cameras_from_metadata, wavelength_from_metadata
 
     out = _out_dir(args.out)
     model = SensorModel(
-        exposure=args.exposure, peak_photons=args.peak_photons, quantum_efficiency=args.qe, shot_noise=args.shot_noise,
+        exposure=args.exposure, peak_photons=args.peak_photons, illumination_time_s=args.illumination_time,
+        photometry=args.photometry, quantum_efficiency=args.qe, shot_noise=args.shot_noise,
         dark_current_e_per_s=args.dark_current, exposure_time_s=args.exposure_time, full_well_e=args.full_well,
         read_noise_e=args.read_noise, gain_e_per_count=args.gain, black_level=args.black_level,
         gaussian_noise_percent=args.noise_percent, bit_depth=args.bit_depth,
@@ -240,11 +258,17 @@ def cmd_sensor(args) -> int:
             raise MitpivError(f"--out: {out / f'{path.stem}.{args.format}'} is a folder where the counts of {path} "
                               f"go; choose another --out folder.")
     # all-black output (e.g. no --exposure: radiance taken as photons rounds to 0) is refused
-    res = apply_sensor_set(images, model, seed=args.seed, progress=_progress(args), on_degenerate="raise")
+    metas = {key[0]: meta for key, (_, _, meta) in zip(keys, inputs, strict=True)}
+    cameras = None
+    if args.photometry != "image" and all(isinstance(m.get("camera"), dict) for m in metas.values()):
+        cameras = cameras_from_metadata(metas, photometric_f_number=args.photometric_f_number)
+    res = apply_sensor_set(images, model, seed=args.seed, progress=_progress(args), on_degenerate="raise",
+                           cameras=cameras, wavelength_nm=wavelength_from_metadata([m for _, _, m in inputs]))
     for key, (path, _, meta) in zip(keys, inputs, strict=True):
         target = out / f"{path.stem}.{args.format}"
         write_counts(target, res.counts[key], {**meta, "sensor_model": res.metadata(key)})
-    print(f"{len(inputs)} image(s), exposure {res.exposure:.4g} photons per unit radiance -> {out}")
+    print(f"{len(inputs)} image(s), {res.photometry} photometry, exposure {res.exposure:.4g} {res.exposure_units} "
+          f"-> {out}")
     return 0
 
 
@@ -291,6 +315,10 @@ def cmd_refocus(args) -> int:
         if not count.is_integer() or count < 1:
             raise MitpivError(f"--z-range: COUNT (the number of planes) must be a whole number >= 1, got {count:g}; "
                               f"e.g. --z-range -20 20 81.")
+        if count > 1 and args.z_range[0] == args.z_range[1]:
+            raise MitpivError(f"--z-range {args.z_range[0]:g} {args.z_range[1]:g} {count:g}: START equals STOP, so the "
+                              f"{count:g} planes would all be the same; give a span (e.g. --z-range -20 20 81) or one "
+                              f"plane (--z {args.z_range[0]:g}).")
         z = None
     elif args.z:
         z = np.asarray(args.z, float)
@@ -299,10 +327,15 @@ def cmd_refocus(args) -> int:
     src = Path(args.input)
     lf = LightField.load(src) if src.suffix == ".npz" else decode(src, white=args.white)
     n_planes = z.size if z is not None else int(args.z_range[2])
+    knob = f"--z-range COUNT {n_planes}" if z is None else f"--z ({n_planes} planes)"
     cost = costs.focal_stack_cost(n_planes, lf.shape[:2], n_samples_per_plane=float(np.prod(lf.shape)))
-    costs.check_disk(cost, out.parent, what=f"refocus: {n_planes} planes", fix="give fewer planes (--z-range COUNT) "
+    if n_planes > costs.MAX_PLANES:
+        raise MitpivError(f"refocus: {knob}: more than the {costs.MAX_PLANES} planes a focal stack may have ({cost}); a "
+                          f"light field resolves depth in tens to a few thousand planes: give fewer planes, e.g. "
+                          f"--z-range -20 20 81.")
+    costs.check_disk(cost, out.parent, what=f"refocus: {knob}", fix="give fewer planes (--z-range COUNT) "
                      "or write --out to a larger disk")
-    costs.check_memory(cost, what=f"refocus: {n_planes} planes", fix="give fewer planes")
+    costs.check_memory(cost, what=f"refocus: {knob}", fix="give fewer planes")
     if z is None:
         z = np.linspace(args.z_range[0], args.z_range[1], n_planes)
     stack = focal_stack(lf, z, method=args.method, magnification=args.magnification, out=out,
@@ -377,6 +410,10 @@ def cmd_reconstruct(args) -> int:
     from mitpiv.render.render import write_preview
 
     out = _out_file(args.out, (".npz",))
+    if args.min_coverage is not None and args.method != "drt-mart":
+        raise MitpivError(f"--min-coverage {args.min_coverage:g} applies to --method drt-mart only (it drops voxels the "
+                          f"light-field camera's ray cones barely reach); --method {args.method} would ignore it. Remove "
+                          f"--min-coverage or use --method drt-mart.")
     grid = _grid_from_args(args)
     truth = _check_truth_frame(args.truth, args.frame) if args.truth else None
     images, metas = _reconstruct_inputs(args.images)
@@ -492,8 +529,12 @@ def cmd_piv(args) -> int:
         field.info["velocity_error"] = metrics
         analysis.plot_velocity_error(field, res, out.with_suffix(".error.png"))
     field.save(out)
+    empty = [str(p) for p, v in ((args.vol_a, va), (args.vol_b, vb)) if not v.any()]
+    outliers = (f"outliers n/a: {' and '.join(empty)} {'is' if len(empty) == 1 else 'are'} empty (every voxel 0), "
+                f"nothing to correlate; check the reconstruction" if empty
+                else f"outliers {100 * field.outlier_ratio:.2f} %")
     print(f"{field.n_vectors} vectors {field.shape[::-1]} (x, y, z), {field.info['seconds']:.1f} s, "
-          f"outliers {100 * field.outlier_ratio:.2f} %, invalid {field.info['invalid']} -> {out}")
+          f"{outliers}, invalid {field.info['invalid']} -> {out}")
     if metrics:
         r, b = metrics["rms_vox"], metrics["bias_vox"]
         print(f"  velocity error [voxels]: rms x {r[0]:.4f} y {r[1]:.4f} z {r[2]:.4f}; "
@@ -599,6 +640,9 @@ def cmd_export(args) -> int:
         print("mitpiv: error: export: choose a format: --vtk (ParaView / VTK files), --openlpt DIR or --openptv DIR "
               "(tracker inputs).", file=sys.stderr)
         return 2
+    for flag, out in (("--out", args.out), ("--openlpt", args.openlpt), ("--openptv", args.openptv)):
+        if out is not None:  # every output folder checked before anything is exported
+            _out_dir(out, flag)
     if args.openlpt or args.openptv:
         from mitpiv.studies.export import export_tracker_inputs
 
@@ -710,8 +754,18 @@ def main(argv=None) -> int:
     s.add_argument("--out", required=True, help="output folder")
     s.add_argument("--format", choices=["png", "tif", "exr"], default="png", help="png/tif: 8/16-bit for PIV software; exr: uint + metadata")
     s.add_argument("--bit-depth", type=int, default=12, help="8, 10, 12, 14 or 16 (default 12)")
-    s.add_argument("--exposure", type=float, default=None, help="photons per pixel per unit of image value")
+    s.add_argument("--exposure", type=float, default=None,
+                   help="photons per pixel per unit of the exposed quantity (per W collected with aperture photometry, "
+                        "per unit of image value with --photometry image)")
     s.add_argument("--peak-photons", type=float, default=None, help="alternative: photons in the brightest pixel")
+    s.add_argument("--illumination-time", type=float, default=None,
+                   help="alternative: photons from physics, the time [s] the sheet lights the particles (pulse "
+                        "duration); the scene rendered at the sheet's real irradiance")
+    s.add_argument("--photometry", choices=["auto", "aperture", "image"], default="auto",
+                   help="aperture: each camera's counts follow its aperture (pixel value x pixel etendue); image: the "
+                        "pixel values are exposed as they are; auto (default): aperture when every camera states one")
+    s.add_argument("--photometric-f-number", type=float, default=None,
+                   help="f-number for the pinhole cameras that state no aperture (aperture photometry)")
     s.add_argument("--qe", type=float, default=1.0, help="quantum efficiency (0, 1]")
     s.add_argument("--shot-noise", action="store_true", help="Poisson photon noise")
     s.add_argument("--dark-current", type=float, default=0.0, help="dark electrons per second")

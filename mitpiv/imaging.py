@@ -13,15 +13,34 @@ The sensor chain (each stage optional, applied in this order, vectorised, seeded
                                                              tomographic simulation studies)
       --bit_depth-->    round to integers, clip to [0, 2^bits - 1]
 
-Exposure is a physical, scene-wide quantity. ``exposure`` is the primary model: photons
-per pixel per unit of rendered radiance (the renderer's pixel value, see
-:data:`mitpiv.render.render.PIXEL_UNITS`), the same for every camera and frame, so a camera
-in forward scatter that receives three times the light of one in back scatter records
-three times the counts. ``peak_photons`` is the alternative that fixes the exposure from
-the data: the brightest pixel *of the whole set of images* (every camera and frame of an
-experiment, see :func:`apply_sensor_set`) becomes that many photons, i.e. ``exposure =
-peak_photons / scene_peak``. With neither, image values are taken as photons
-(``exposure = 1``). Likewise the reference ``peak`` of ``gaussian_noise_percent`` is, unless
+Exposure is a physical, scene-wide quantity, the same for every camera and frame; each
+camera's counts follow the light its own aperture collects (``photometry``, below). So a
+camera in forward scatter that receives three times the light of one in back scatter
+records three times the counts, and of two cameras at f/4 and f/8 the first records four
+times the counts of the second.
+
+Photometry (``photometry``; :mod:`mitpiv.photometry`):
+
+- ``"aperture"``: the exposed quantity is the power a pixel collects, the rendered value
+  times the pixel's étendue (``V G`` [W], :func:`mitpiv.photometry.pixel_etendue`: the
+  lens pupil's solid angle for radiance cameras, the pixel area for plenoptic ones, which
+  render irradiance). ``exposure`` is then in photons per watt, and
+  ``illumination_time_s`` gives it in physical units: ``t lambda / (h c)`` for the
+  sheet's wavelength, with the scene rendered at the sheet's real irradiance.
+- ``"image"``: the exposed quantity is the rendered value itself (photons per unit of
+  pixel value), as for a set of pinhole cameras without apertures; every camera of the
+  set must then record the same quantity (all radiance, or all irradiance).
+- ``"auto"`` (default): ``"aperture"`` when every camera of the set states an aperture
+  (a thin lens, a pinhole's ``psf_f_number`` or ``photometric_f_number``, a plenoptic main
+  lens), ``"image"`` when none does or when the cameras are not known (plain arrays);
+  a set that mixes both is refused with the fix.
+
+``exposure`` is the primary model: photons per pixel per unit of the exposed quantity.
+``peak_photons`` is the alternative that fixes the exposure from the data: the brightest
+pixel *of the whole set of images* (every camera and frame of an experiment, see
+:func:`apply_sensor_set`) becomes that many photons, i.e. ``exposure = peak_photons /
+scene_peak``. ``illumination_time_s`` is the third, from physics. With none of them, the
+exposed values are taken as photons (``exposure = 1``). Likewise the reference ``peak`` of ``gaussian_noise_percent`` is, unless
 given, the noise-free peak count of the whole set, so the noise has one absolute sigma on
 every image. :func:`apply_sensor` on one image treats that image as the whole set (or takes
 the set's peak as ``scene_peak``).
@@ -44,11 +63,14 @@ import numpy as np
 
 from mitpiv.errors import ConfigError, MitpivWarning, check_positive
 
-__all__ = ["SensorModel", "SensorSetResult", "apply_sensor", "apply_sensor_set", "resolve_exposure", "degenerate_counts",
+__all__ = ["SensorModel", "SensorSetResult", "apply_sensor", "apply_sensor_set", "resolve_exposure", "resolve_photometry",
+           "degenerate_counts",
            "convolve_psf", "sensor_mean_variance", "PointPSFTable", "splat_points", "point_images"]
 
 _log = logging.getLogger(__name__)
 _BIT_DEPTHS = (8, 10, 12, 14, 16)
+#: The sensor model's photometry modes (see the module docstring).
+PHOTOMETRY = ("auto", "aperture", "image")
 
 
 @dataclass(frozen=True)
@@ -57,9 +79,16 @@ class SensorModel:
 
     Attributes
     ----------
-    exposure : photons per pixel per unit of rendered radiance (scene-wide).
-    peak_photons : alternative to ``exposure``: the maximum over the whole set of images
-        (all cameras and frames; one image: its own maximum) becomes this many photons.
+    exposure : photons per pixel per unit of the exposed quantity (scene-wide): of the
+        rendered value with ``photometry = "image"``, per watt collected with "aperture".
+    peak_photons : alternative to ``exposure``: the maximum of the exposed quantity over
+        the whole set of images (all cameras and frames; one image: its own maximum)
+        becomes this many photons.
+    illumination_time_s : alternative to ``exposure``: photons from physics, an exposure of
+        ``t lambda / (h c)`` photons per watt, ``t`` the time the sheet lights the particles
+        within the exposure [s] (a pulsed laser's pulse duration); needs "aperture"
+        photometry and the scene rendered at the sheet's real irradiance.
+    photometry : "auto", "aperture" or "image" (see the module docstring).
     quantum_efficiency : electrons per photon, in (0, 1].
     shot_noise : Poisson photon (shot) noise.
     dark_current_e_per_s, exposure_time_s : dark electrons (Poisson) = rate x time.
@@ -76,6 +105,8 @@ class SensorModel:
 
     exposure: float | None = None
     peak_photons: float | None = None
+    illumination_time_s: float | None = None
+    photometry: str = "auto"
     quantum_efficiency: float = 1.0
     shot_noise: bool = False
     dark_current_e_per_s: float = 0.0
@@ -94,9 +125,17 @@ class SensorModel:
             if not (isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) and v >= 0):
                 raise ConfigError(f"sensor: parameter '{name}' must be a finite number >= 0, got {v!r}.")
 
-        if self.exposure is not None and self.peak_photons is not None:
-            raise ConfigError("sensor: give 'exposure' or 'peak_photons', not both.")
-        for name in ("exposure", "peak_photons", "full_well_e", "peak"):
+        given = [k for k in ("exposure", "peak_photons", "illumination_time_s") if getattr(self, k) is not None]
+        if len(given) > 1:
+            raise ConfigError(f"sensor: give one of 'exposure', 'peak_photons' and 'illumination_time_s', not both "
+                              f"({' and '.join(given)}).")
+        if self.photometry not in PHOTOMETRY:
+            raise ConfigError(f"sensor: parameter 'photometry' must be one of {', '.join(PHOTOMETRY)}, "
+                              f"got {self.photometry!r}.")
+        if self.illumination_time_s is not None and self.photometry == "image":
+            raise ConfigError("sensor: 'illumination_time_s' gives photons from the power a pixel collects, which needs "
+                              "photometry = 'aperture' (or 'auto'), not 'image'.")
+        for name in ("exposure", "peak_photons", "illumination_time_s", "full_well_e", "peak"):
             if getattr(self, name) is not None:
                 check_positive(name, getattr(self, name), owner="sensor")
         for name in ("dark_current_e_per_s", "exposure_time_s", "read_noise_e", "black_level", "gaussian_noise_percent"):
@@ -107,10 +146,10 @@ class SensorModel:
         check_positive("gain_e_per_count", self.gain_e_per_count, owner="sensor")
         if self.bit_depth is not None and self.bit_depth not in _BIT_DEPTHS:
             raise ConfigError(f"sensor: parameter 'bit_depth' must be one of {_BIT_DEPTHS} or None, got {self.bit_depth!r}.")
-        if self.shot_noise and self.exposure is None and self.peak_photons is None:
+        if self.shot_noise and not given:
             raise ConfigError(
-                "sensor: 'shot_noise' needs photon counts: give 'exposure' (photons per unit of "
-                "image value) or 'peak_photons'."
+                "sensor: 'shot_noise' needs photon counts: give 'exposure' (photons per unit of the exposed "
+                "quantity), 'peak_photons' or 'illumination_time_s'."
             )
 
     def to_dict(self) -> dict:
@@ -134,20 +173,25 @@ def _image(image, what: str) -> np.ndarray:
     return img
 
 
-def resolve_exposure(model: SensorModel, scene_peak: float) -> tuple[float, float | None]:
+def resolve_exposure(model: SensorModel, scene_peak: float, *, wavelength_nm: float | None = None
+                     ) -> tuple[float, float | None]:
     """The exposure and the Gaussian-noise reference a set of images is taken with.
 
     Parameters
     ----------
     model : SensorModel
     scene_peak : float
-        Maximum rendered value over the whole set of images [render units], >= 0.
+        Maximum of the exposed quantity over the whole set of images (rendered value, or
+        collected power with aperture photometry), >= 0.
+    wavelength_nm : float, optional
+        The sheet's vacuum wavelength [nm]; needed with ``illumination_time_s``.
 
     Returns
     -------
     exposure : float
-        Photons per pixel per unit of rendered radiance: ``model.exposure``, else
-        ``peak_photons / scene_peak`` (0 for an all-black set), else 1.
+        Photons per pixel per unit of the exposed quantity: ``model.exposure``, else
+        ``peak_photons / scene_peak`` (0 for an all-black set), else from
+        ``illumination_time_s`` (:func:`mitpiv.photometry.photons_per_watt`), else 1.
     noise_peak_counts : float or None
         Reference of ``gaussian_noise_percent`` [counts]: ``model.peak``, else
         ``exposure * QE * scene_peak / gain``; None without Gaussian noise.
@@ -161,6 +205,13 @@ def resolve_exposure(model: SensorModel, scene_peak: float) -> tuple[float, floa
         exposure = model.peak_photons / top if top > 0 else 0.0
         if top == 0:
             _log.warning("sensor: every image of the set is black; peak_photons gives no exposure.")
+    elif model.illumination_time_s is not None:
+        from mitpiv.photometry import photons_per_watt
+
+        if wavelength_nm is None:
+            raise ConfigError("sensor: 'illumination_time_s' needs the light's wavelength: render with a laser_sheet "
+                              "(its wavelength is in the image metadata) or pass wavelength_nm.")
+        exposure = photons_per_watt(model.illumination_time_s, wavelength_nm)
     else:
         exposure = 1.0  # image values are photons already
     noise_peak = None
@@ -206,7 +257,7 @@ def _counts(img: np.ndarray, m: SensorModel, rng: np.random.Generator, exposure:
 
 
 def apply_sensor(image, model: SensorModel | None = None, *, seed: int = 0, scene_peak: float | None = None,
-                 **kwargs) -> np.ndarray:
+                 etendue=None, wavelength_nm: float | None = None, **kwargs) -> np.ndarray:
     """Turn one rendered image into sensor counts.
 
     The image is the whole set of images unless ``scene_peak`` says otherwise: with
@@ -227,8 +278,15 @@ def apply_sensor(image, model: SensorModel | None = None, *, seed: int = 0, scen
         the same seed gives the same image. :func:`mitpiv.streams.sensor_seed` derives one
         per camera and frame.
     scene_peak : float, optional
-        Maximum rendered value over the set this image belongs to [render units], >= the
+        Maximum of the exposed quantity over the set this image belongs to, >= the
         image's maximum; default the image's maximum.
+    etendue : float or (H, W) array, optional
+        The pixels' étendue (:func:`mitpiv.photometry.pixel_etendue` of the image's camera
+        record): aperture photometry, the exposed quantity is ``image * etendue`` [W].
+        Needed with ``photometry = "aperture"`` and ``illumination_time_s``; refused with
+        ``photometry = "image"``.
+    wavelength_nm : float, optional
+        The sheet's wavelength [nm], for ``illumination_time_s``.
 
     Returns
     -------
@@ -239,13 +297,25 @@ def apply_sensor(image, model: SensorModel | None = None, *, seed: int = 0, scen
     m = _model(model, kwargs)
     seed = check_seed(seed, upper=2**64)
     img = _image(image, "apply_sensor")
+    if etendue is None and (m.photometry == "aperture" or m.illumination_time_s is not None):
+        raise ConfigError("apply_sensor: aperture photometry needs the pixels' étendue: pass "
+                          "etendue=mitpiv.photometry.pixel_etendue(meta['camera']), or use photometry = 'image'.")
+    if etendue is not None:
+        if m.photometry == "image":
+            raise ConfigError("apply_sensor: photometry = 'image' exposes the rendered value; leave 'etendue' out, "
+                              "or use photometry = 'aperture'.")
+        g = np.asarray(etendue, dtype=np.float64)
+        if g.shape not in ((), img.shape) or not (np.all(np.isfinite(g)) and np.all(g > 0)):
+            raise ConfigError(f"apply_sensor: 'etendue' must be a positive number or an array of the image's shape "
+                              f"{img.shape} [mm^2 sr or mm^2], got shape {np.shape(etendue)}.")
+        img = img * g
     own = float(img.max())
     if scene_peak is None:
         scene_peak = own
     elif not (isinstance(scene_peak, numbers.Real) and math.isfinite(scene_peak) and scene_peak >= own):
         raise ConfigError(f"apply_sensor: 'scene_peak' must be the maximum over a set that holds this image, "
                           f">= its maximum {own!r}, got {scene_peak!r}.")
-    exposure, noise_peak = resolve_exposure(m, scene_peak)
+    exposure, noise_peak = resolve_exposure(m, scene_peak, wavelength_nm=wavelength_nm)
     return _counts(img, m, np.random.default_rng(seed), exposure, noise_peak)
 
 
@@ -259,9 +329,9 @@ class SensorSetResult:
         Sensor counts (uint8 / uint16 with ``bit_depth``, else float64), in input order.
     model : SensorModel
     exposure : float
-        Photons per pixel per unit of rendered radiance, the same for every image.
+        Photons per pixel per unit of the exposed quantity, the same for every image.
     scene_peak : float
-        Maximum rendered value over the set [render units].
+        Maximum of the exposed quantity over the set.
     noise_peak_counts : float or None
         Reference peak of ``gaussian_noise_percent`` [counts] (sigma = X/100 of it).
     seed : int
@@ -272,6 +342,12 @@ class SensorSetResult:
         scene_peak=scene_peak)`` reproduces ``counts[key]``.
     degenerate : dict {(camera_id, frame): str}
         Images that carry no particle signal, with the reason (:func:`degenerate_counts`).
+    photometry : str
+        "aperture" (the exposed quantity is the collected power ``V G`` [W]) or "image"
+        (the rendered value ``V``).
+    etendue_axis : dict {camera_id: float}
+        With aperture photometry, each camera's on-axis pixel étendue [mm^2 sr, or mm^2 for
+        irradiance cameras] (:func:`mitpiv.photometry.axis_etendue`).
     """
 
     counts: dict
@@ -282,14 +358,26 @@ class SensorSetResult:
     seed: int
     seeds: dict = field(default_factory=dict)
     degenerate: dict = field(default_factory=dict)
+    photometry: str = "image"
+    etendue_axis: dict = field(default_factory=dict)
+
+    @property
+    def exposure_units(self) -> str:
+        """What ``exposure`` counts photons per."""
+        return ("photons per W collected by a pixel (rendered value x pixel etendue)" if self.photometry == "aperture"
+                else "photons per unit of rendered pixel value")
 
     def metadata(self, key) -> dict:
         """JSON-ready record of how image ``key`` was taken, for its file's metadata: the
         model's fields (as :meth:`SensorModel.to_dict`) and what was used with them,
-        ``exposure_used_photons_per_unit``, ``scene_peak``, ``noise_peak_counts``,
-        ``experiment_seed``, ``sensor_seed`` and ``stream`` (purpose, camera, frame)."""
+        ``exposure_used_photons_per_unit`` (and its ``exposure_units``), ``photometry``,
+        ``etendue_axis`` (this camera's, aperture photometry), ``scene_peak``,
+        ``noise_peak_counts``, ``experiment_seed``, ``sensor_seed`` and ``stream``
+        (purpose, camera, frame)."""
         cam, frame = key
         return {**self.model.to_dict(), "exposure_used_photons_per_unit": self.exposure,
+                "exposure_units": self.exposure_units, "photometry": self.photometry,
+                "etendue_axis": self.etendue_axis.get(cam),
                 "scene_peak": self.scene_peak, "noise_peak_counts": self.noise_peak_counts,
                 "experiment_seed": self.seed, "sensor_seed": self.seeds[key],
                 "stream": {"purpose": "sensor", "camera": cam, "frame": frame}}
@@ -303,8 +391,9 @@ def degenerate_counts(counts: np.ndarray, signal_peak_counts: float, model: Sens
     only noise. ``signal_peak_counts`` is ``exposure * QE * scene_peak / gain`` [counts].
     """
     c = np.asarray(counts)
-    fix = ("raise the exposure: give 'exposure' (photons per unit of rendered radiance; mitpiv sensor "
-           "--exposure) or 'peak_photons' (--peak-photons)")
+    fix = ("raise the exposure: give 'exposure' (photons per unit of the exposed quantity: the rendered value, or "
+           "with aperture photometry the watts a pixel collects; mitpiv sensor --exposure), 'peak_photons' "
+           "(--peak-photons) or 'illumination_time_s' (--illumination-time)")
     if signal_peak_counts <= 0:
         return "the rendered image is black (no light reached this camera); no exposure can help: see the render"
     if model.bit_depth is not None and signal_peak_counts < 0.5:
@@ -319,14 +408,99 @@ def degenerate_counts(counts: np.ndarray, signal_peak_counts: float, model: Sens
     return None
 
 
+def resolve_photometry(model: SensorModel, cameras: Mapping | None, camera_ids) -> tuple[str, dict]:
+    """The photometry a set of images is exposed with, and each camera's pixel étendue.
+
+    Parameters
+    ----------
+    model : SensorModel
+    cameras : mapping {camera_id: camera record of the image metadata} or None
+    camera_ids : the cameras of the set
+
+    Returns
+    -------
+    ("aperture", {camera_id: (H, W) étendue}) or ("image", {}).
+
+    Raises
+    ------
+    ConfigError
+        "aperture" (or ``illumination_time_s``) with a camera that states no aperture or
+        is not described; "auto" with a set that mixes cameras with and without an
+        aperture; "image" with cameras that record different quantities (radiance and
+        the plenoptic camera's irradiance).
+    """
+    from mitpiv.photometry import FIX, axis_etendue, pixel_etendue
+
+    ids = sorted(set(camera_ids))
+    m_aperture = model.photometry == "aperture" or model.illumination_time_s is not None
+    if cameras is None:
+        if m_aperture:
+            raise ConfigError("sensor: aperture photometry needs each camera's record (its image metadata's "
+                              "'camera'): pass cameras={camera_id: meta['camera']}, or use photometry = 'image'.")
+        return "image", {}
+    missing = [c for c in ids if c not in cameras]
+    if missing:
+        raise ConfigError(f"sensor: no camera record for camera(s) {missing}; pass cameras={{camera_id: "
+                          f"meta['camera']}} for every camera of the set.")
+    if model.photometry == "image":
+        kinds = {c: str((cameras[c] or {}).get("pixel_value", "radiance")).split()[0] for c in ids}
+        if len(set(kinds.values())) > 1:
+            raise ConfigError(f"sensor: photometry = 'image' exposes the rendered values, but these cameras record "
+                              f"different quantities ({kinds}): one exposure cannot serve both. Use photometry = "
+                              f"'aperture' (each camera's pixel values times its pixels' étendue).")
+        return "image", {}
+    has = {c: axis_etendue(cameras[c]) is not None for c in ids}
+    if not any(has.values()) and not m_aperture:
+        return "image", {}
+    lacking = [c for c in ids if not has[c]]
+    if lacking:
+        why = ("photometry = 'aperture'" if model.photometry == "aperture" else
+               "illumination_time_s" if model.illumination_time_s is not None else
+               f"cameras {[c for c in ids if has[c]]} state an aperture, so their counts follow it")
+        raise ConfigError(f"sensor: camera(s) {lacking} have no aperture ({why}); {FIX}.")
+    return "aperture", {c: pixel_etendue(cameras[c], camera_id=c) for c in ids}
+
+
+#: Share of an image's pixels at the full well or the ADC's top code above which the sensor warns.
+SATURATION_WARN_FRACTION = 0.01
+
+
+def saturation_warning(image: np.ndarray, counts: np.ndarray, exposure: float, model: SensorModel) -> str | None:
+    """Why an image of counts is saturated, or None: more than
+    :data:`SATURATION_WARN_FRACTION` of its pixels reach the full well (noise-free
+    electrons ``image * exposure * QE >= full_well_e``) or the ADC's top code
+    (``2**bit_depth - 1``); the text names the share and the fix."""
+    img = np.asarray(image)
+    if not img.size:
+        return None
+    parts = []
+    if model.full_well_e is not None:
+        f = float(np.mean(img * (exposure * model.quantum_efficiency) >= model.full_well_e))
+        if f > SATURATION_WARN_FRACTION:
+            parts.append(f"{100 * f:.1f} % of the pixels reach the full well ({model.full_well_e:g} e-)")
+    if model.bit_depth is not None:
+        top = 2 ** model.bit_depth - 1
+        f = float(np.mean(np.asarray(counts) >= top))
+        if f > SATURATION_WARN_FRACTION:
+            parts.append(f"{100 * f:.1f} % of the pixels are clipped at the ADC's top code {top} "
+                         f"({model.bit_depth} bits)")
+    if not parts:
+        return None
+    return (f"{' and '.join(parts)} (more than {100 * SATURATION_WARN_FRACTION:g} %): their intensities are lost; "
+            f"lower the exposure or peak_photons, or raise full_well_e / gain_e_per_count / bit_depth")
+
+
 def apply_sensor_set(images: Mapping, model: SensorModel | None = None, *, seed: int, progress=None,
-                     on_degenerate: str = "warn", **kwargs) -> SensorSetResult:
+                     on_degenerate: str = "warn", cameras: Mapping | None = None,
+                     wavelength_nm: float | None = None, **kwargs) -> SensorSetResult:
     """Turn a set of rendered images (every camera and frame of an experiment) into counts
     with one scene-wide exposure and one independent noise stream per image.
 
-    The set's maximum rendered value (``scene_peak``) fixes the exposure once (with
+    The set's maximum exposed value (``scene_peak``) fixes the exposure once (with
     ``peak_photons``) and the reference peak of ``gaussian_noise_percent``; so two cameras
-    whose rendered images differ 3:1 keep a 3:1 mean count and see the same noise sigma.
+    whose rendered images differ 3:1 keep a 3:1 mean count and see the same noise sigma,
+    and with aperture photometry (``cameras`` given, :func:`resolve_photometry`) an f/4
+    camera records 4 times the counts of an f/8 one.
     Image ``(camera, frame)`` takes its noise from
     ``np.random.default_rng(mitpiv.streams.sensor_seed(seed, camera, frame))``: independent
     of the other images, and unchanged when the set holds other cameras or frames.
@@ -347,6 +521,12 @@ def apply_sensor_set(images: Mapping, model: SensorModel | None = None, *, seed:
         :class:`~mitpiv.errors.MitpivWarning` naming them; "raise" raises
         :class:`ConfigError` when *every* image is degenerate (warns for some);
         "ignore" only records them in ``result.degenerate``.
+    cameras : mapping {camera_id: dict}, optional
+        Each camera's record of the image metadata (``meta["camera"]``), for aperture
+        photometry (:func:`resolve_photometry`); without it the rendered values are exposed.
+    wavelength_nm : float, optional
+        The sheet's wavelength [nm] (``meta["illumination"][0]["wavelength_nm"]``), for
+        ``illumination_time_s``.
 
     Returns
     -------
@@ -370,8 +550,15 @@ def apply_sensor_set(images: Mapping, model: SensorModel | None = None, *, seed:
         arrays[(key[0], int(key[1]))] = _image(image, f"apply_sensor_set: image {key!r}")
     if len(arrays) != len(images):
         raise ConfigError("apply_sensor_set: two keys name the same (camera_id, frame).")
+    photometry, etendue = resolve_photometry(m, cameras, [k[0] for k in arrays])
+    for key in arrays:
+        if key[0] in etendue:
+            if etendue[key[0]].shape != arrays[key].shape:
+                raise ConfigError(f"sensor: image {key!r} is {arrays[key].shape[::-1]} px but its camera record says "
+                                  f"{etendue[key[0]].shape[::-1]}; pass the record of the camera that rendered it.")
+            arrays[key] = arrays[key] * etendue[key[0]]
     scene_peak = max(float(a.max()) for a in arrays.values())
-    exposure, noise_peak = resolve_exposure(m, scene_peak)
+    exposure, noise_peak = resolve_exposure(m, scene_peak, wavelength_nm=wavelength_nm)
     if on_degenerate not in ("warn", "raise", "ignore"):
         raise ConfigError(f"apply_sensor_set: 'on_degenerate' must be 'warn', 'raise' or 'ignore', got {on_degenerate!r}.")
     counts, seeds, bad = {}, {}, {}
@@ -382,6 +569,8 @@ def apply_sensor_set(images: Mapping, model: SensorModel | None = None, *, seed:
         reason = degenerate_counts(counts[key], signal, m)
         if reason is not None:
             bad[key] = reason
+        elif (sat := saturation_warning(arrays[key], counts[key], exposure, m)) is not None:
+            warnings.warn(f"sensor: camera {key[0]!r} frame {key[1]}: {sat}.", MitpivWarning, stacklevel=2)
     if bad and on_degenerate != "ignore":
         first = next(iter(bad))
         text = (f"{len(bad)} of {len(arrays)} sensor image(s) carry no particle signal, e.g. camera {first[0]!r} "
@@ -389,8 +578,11 @@ def apply_sensor_set(images: Mapping, model: SensorModel | None = None, *, seed:
         if on_degenerate == "raise" and len(bad) == len(arrays):
             raise ConfigError(f"sensor: {text}")
         warnings.warn(text, MitpivWarning, stacklevel=2)
+    from mitpiv.photometry import axis_etendue
+
     return SensorSetResult(counts=counts, model=m, exposure=exposure, scene_peak=scene_peak,
-                           noise_peak_counts=noise_peak, seed=seed, seeds=seeds, degenerate=bad)
+                           noise_peak_counts=noise_peak, seed=seed, seeds=seeds, degenerate=bad, photometry=photometry,
+                           etendue_axis={c: axis_etendue(cameras[c]) for c in etendue})
 
 
 def sensor_mean_variance(signal_photons: float, model: SensorModel) -> tuple[float, float]:

@@ -23,7 +23,7 @@ import numpy as np
 
 from mitpiv.errors import ConfigError
 
-__all__ = ["PROFILES", "sheet_profile", "check_profile", "NUMPY_OPS", "drjit_ops"]
+__all__ = ["PROFILES", "sheet_profile", "check_profile", "profile_integral", "peak_irradiance", "NUMPY_OPS", "drjit_ops"]
 
 PROFILES = ("gaussian", "tophat", "supergaussian")
 LN2 = math.log(2.0)
@@ -57,3 +57,29 @@ def sheet_profile(s, thickness: float, profile: str = "gaussian", order: float =
     if profile == "tophat":
         return xp.where(xp.abs(q) <= 1.0, 1.0 + 0.0 * q, 0.0 * q)
     raise ConfigError(f"sheet_profile: unknown profile {profile!r}; use one of {PROFILES}.")
+
+
+def profile_integral(thickness: float, profile: str = "gaussian", order: float = 2.0) -> float:
+    """``integral of the profile over s`` [mm]: the sheet's effective thickness, peak
+    irradiance x this x width = power. Gaussian ``t sqrt(pi / ln 2) / 2`` (1.064 t),
+    super-Gaussian ``t Gamma(1 + 1/order) / ln2^(1/order)``, top hat ``t``."""
+    check_profile(profile, order, owner="sheet")
+    if profile == "tophat":
+        return float(thickness)
+    n = 2.0 if profile == "gaussian" else float(order)
+    return float(thickness) * math.gamma(1.0 + 1.0 / n) / LN2 ** (1.0 / n)
+
+
+def peak_irradiance(pulse_energy_mj: float, pulse_duration_ns: float, thickness_mm: float, width_mm: float,
+                    profile: str = "gaussian", order: float = 2.0) -> float:
+    """The peak irradiance [W/mm^2] (the ``laser_sheet``'s ``irradiance``) of a pulsed sheet:
+    the pulse's mean power over its cross-section, ``E / (tau w integral g(s) ds)``, with the
+    width ``w`` [mm] uniformly lit. With the pulse duration as the sensor model's
+    ``illumination_time_s`` the counts are in photons (:mod:`mitpiv.photometry`)."""
+    from mitpiv.errors import check_positive
+
+    e = check_positive("pulse_energy_mj", pulse_energy_mj, owner="sheet", unit="mJ") * 1e-3
+    tau = check_positive("pulse_duration_ns", pulse_duration_ns, owner="sheet", unit="ns") * 1e-9
+    t = check_positive("thickness_mm", thickness_mm, owner="sheet", unit="mm")
+    w = check_positive("width_mm", width_mm, owner="sheet", unit="mm")
+    return e / (tau * w * profile_integral(t, profile, order))

@@ -281,8 +281,16 @@ def test_doc_worked_numbers_are_the_demo_scene(tmp_path):
     scene (scenes/tomo4: 1 W/mm^2, 85 mm lens, 10 um pixels, 1 m away, FFT PSF, Catmull-Rom
     film) renders the summed image the page states, and the formula gives it. Rendered at 160
     px: the f/16 PSF window (76 px) fits, so the PSF keeps the sum."""
+    from mitpiv.imaging import SensorModel, apply_sensor
+    from mitpiv.photometry import pixel_etendue
+    from mitpiv.physics.sheet import peak_irradiance
+    from mitpiv.render.render import sensor_model
+
     table = _doc_table()
     assert set(table) == {"cam0", "cam2"}, table
+    found = re.search(r"`cam0` collects\s+about (\d+) photons from this droplet and `cam2` about (\d+)",
+                      (ROOT / "docs" / "radiometry.md").read_text())
+    photons = {"cam0": float(found[1]), "cam2": float(found[2])}
     shutil.copy(ROOT / "scenes" / "tomo4" / "scene.xml", tmp_path / "scene.xml")
     write_particles_ply(tmp_path / "particles_0.ply", np.zeros((1, 3)), DIAMETER_UM, proxy_radius_mm=0.02)
     sc = load_scene(tmp_path / "scene.xml", params={"resolution": 160})
@@ -297,4 +305,10 @@ def test_doc_worked_numbers_are_the_demo_scene(tmp_path):
         assert dcs == pytest.approx(ref_dcs, rel=DOC_NUMBER_RTOL)
         omega_pix = (s.camera.pixel_pitch_um * 1e-3 / s.camera.focal_length_mm) ** 2
         assert total == pytest.approx(1.0 * ref_dcs / (r * r * omega_pix), rel=DOC_NUMBER_RTOL)
-        assert render_sensor(sc, s).astype(np.float64).sum() == pytest.approx(total, rel=DOC_NUMBER_RTOL)
+        img = render_sensor(sc, s).astype(np.float64)
+        assert img.sum() == pytest.approx(total, rel=DOC_NUMBER_RTOL)
+        # the page's photons: the render (at 1 W/mm^2) scaled to a 200 mJ, 5 ns pulse over the
+        # 6 mm x 50 mm sheet, exposed through the f/16 pupil for 5 ns (aperture photometry)
+        counts = apply_sensor(img, SensorModel(illumination_time_s=5e-9), etendue=pixel_etendue(sensor_model(s)),
+                              wavelength_nm=532.0)
+        assert counts.sum() * peak_irradiance(200.0, 5.0, 6.0, 50.0) == pytest.approx(photons[cam], rel=DOC_NUMBER_RTOL)

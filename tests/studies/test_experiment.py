@@ -96,7 +96,7 @@ def test_failed_stage_leaves_nothing_and_resumes(tmp_path, caplog, monkeypatch):
     assert tomo.STAGES[:2] == ("particles", "render")
     run = tmp_path / "run"
     assert (run / "render" / "stage.json").is_file()
-    assert not (run / "reconstruct").exists() and not list(run.glob(".*.tmp"))
+    assert not (run / "reconstruct").exists() and not list(run.glob(".*.mitpiv-tmp-*"))
     write(tmp_path, BASE.replace('method = "mart"', 'method = "mlos"').replace("iterations = 3\n", ""))
     with caplog.at_level(logging.INFO, logger="mitpiv"):
         m = run_experiment(exp, run)
@@ -122,12 +122,13 @@ def test_cli_run(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "[reconstruction] method" in err and "'marts'" in err and "'smart'" in err and not (tmp_path / "y").exists()
     # --check validates only; --set and typed flags reach the experiment
-    assert main(["run", str(exp), "--check", "--set", "piv.windows=[48, 32]", "--voxel-mm", "0.2"]) == 0
+    assert main(["run", str(exp), "--check", "--set", "piv.windows=[16, 8]", "--voxel-mm", "0.2"]) == 0
     assert "valid tomo experiment" in capsys.readouterr().out
 
 
 def test_sensor_stage(tmp_path):
-    exp = write(tmp_path, BASE + "\n[sensor]\nbit_depth = 8\npeak_photons = 2000\nshot_noise = true\n")
+    # 2000 photons at 10 e- per count: the brightest pixel at 200 of 255 counts, none clipped
+    exp = write(tmp_path, BASE + "\n[sensor]\nbit_depth = 8\npeak_photons = 2000\nshot_noise = true\ngain_e_per_count = 10.0\n")
     run_experiment(exp, tmp_path / "run")
     from mitpiv.io import read_exr
 
@@ -141,6 +142,7 @@ def test_sensor_stage_is_scene_wide_with_independent_streams(tmp_path):
     noise stream per (camera, frame): the shot-noise fields of two cameras are
     uncorrelated, a rerun in another folder is bit-identical."""
     from mitpiv.io import read_exr
+    from mitpiv.photometry import pixel_etendue
     from mitpiv.studies import load_experiment, run_config
 
     exp = write(tmp_path, BASE + "\n[sensor]\npeak_photons = 4000\nshot_noise = true\n")
@@ -150,8 +152,12 @@ def test_sensor_stage_is_scene_wide_with_independent_streams(tmp_path):
     rendered, counts, seeds = {}, {}, set()
     for f in sorted((tmp_path / "a" / "sensor").glob("*.exr")):
         c, meta = read_exr(f)
-        r, _ = read_exr(tmp_path / "a" / "render" / f.name)
-        rendered[f.name], counts[f.name] = r.astype(np.float64), c.astype(np.float64)
+        r, rmeta = read_exr(tmp_path / "a" / "render" / f.name)
+        # the demo's cameras state their aperture (psf_f_number): each pixel is exposed to the
+        # power it collects, the rendered radiance times its etendue
+        assert meta["sensor"]["photometry"] == "aperture"
+        rendered[f.name] = r.astype(np.float64) * pixel_etendue(rmeta["camera"])
+        counts[f.name] = c.astype(np.float64)
         seeds.add(meta["sensor"]["sensor_seed"])
         np.testing.assert_array_equal(c, read_exr(tmp_path / "b" / "sensor" / f.name)[0])  # bit-identical rerun
         exposure = meta["sensor"]["exposure_used_photons_per_unit"]
@@ -159,7 +165,7 @@ def test_sensor_stage_is_scene_wide_with_independent_streams(tmp_path):
     peak = max(r.max() for r in rendered.values())
     assert exposure == pytest.approx(4000 / peak, rel=1e-12)
     names = sorted(rendered)
-    # mean counts = exposure x mean radiance for every image (Poisson: 5 standard errors)
+    # mean counts = exposure x collected power for every image (Poisson: 5 standard errors)
     for n in names:
         expected = exposure * rendered[n].sum()
         assert abs(counts[n].sum() - expected) < 5 * np.sqrt(expected), n

@@ -40,6 +40,10 @@ distortion_percent : float [%]
     Alternative to ``k1``: radial shift at the image corner (positive = barrel).
 f_number : float, default none
     Thin-lens aperture (f / diameter); absent = ideal pinhole.
+photometric_f_number : float, default ``psf_f_number``
+    Pinhole only: the f-number whose aperture the camera collects light through, for the
+    sensor model's aperture photometry (:mod:`mitpiv.photometry`), keeping the pinhole's
+    infinite depth of field. A thin lens collects through its ``f_number``.
 focus_distance_mm : float [mm]
     In-focus distance along the optical axis (required with ``f_number``).
 focus_plane_normal : vector, default optical axis
@@ -162,6 +166,7 @@ class DistortedPinhole(MitpivSensor):
                           p1=rd.float("p1", 0.0), p2=rd.float("p2", 0.0))
         f_number = rd.float("f_number", None)
         focus = rd.float("focus_distance_mm", None)
+        self.photometric_f_number = _photometric_f_number(rd, f_number)
         focus_normal = rd.vector("focus_plane_normal", None)
         self.near_clip = check_positive("near_clip", rd.float("near_clip", 0.01), owner="distorted_pinhole", unit="mm")
         self.far_clip = check_positive("far_clip", rd.float("far_clip", 1e7), owner="distorted_pinhole", unit="mm")
@@ -199,6 +204,7 @@ class DistortedPinhole(MitpivSensor):
         xml_pose = self._place(rd, props) or "to_world" in props
         f_number = rd.float("f_number", None)
         focus = rd.float("focus_distance_mm", None)
+        self.photometric_f_number = _photometric_f_number(rd, f_number)
         focus_normal = rd.vector("focus_plane_normal", None)
         self.near_clip = check_positive("near_clip", rd.float("near_clip", 0.01), owner="distorted_pinhole", unit="mm")
         self.far_clip = check_positive("far_clip", rd.float("far_clip", 1e7), owner="distorted_pinhole", unit="mm")
@@ -465,6 +471,7 @@ class DistortedPinhole(MitpivSensor):
         d["newton_iterations"] = self.newton_iterations
         d["focus_plane_normal_camera_mitsuba"] = None if self._focus_n is None else list(self._focus_n)
         d["psf"] = None if self.psf is None else self.psf.to_dict()
+        d["photometric_f_number"] = self.photometric_f_number
         return d
 
 
@@ -494,6 +501,17 @@ def _focus_plane_local(normal_world, to_world, cam) -> tuple[float, float, float
                     f"({u}, {v}); reduce its tilt (focus_plane_normal {np.round(n, 4).tolist()})."
                 )
     return tuple(float(x) for x in n_loc)
+
+
+def _photometric_f_number(rd, f_number):
+    """The pinhole's stated photometric f-number (None: not stated, or a thin lens)."""
+    n = rd.float("photometric_f_number", None)
+    if n is None:
+        return None
+    if f_number is not None:
+        raise ConfigError(f"distorted_pinhole: 'photometric_f_number' ({n}) is for a pinhole; this camera is a thin lens "
+                          f"and collects light through its 'f_number' ({f_number}). Remove 'photometric_f_number'.")
+    return check_positive("photometric_f_number", n, owner="distorted_pinhole")
 
 
 def _read_psf_props(rd, f_number, focus, focal, pitch):

@@ -40,6 +40,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from mitpiv.costs import MAX_ITERATIONS
+from mitpiv.errors import ConfigError
 from mitpiv.studies.schema import Table, Vec3, model_from_signature
 from mitpiv.studies.shared import (
     RENDER_PACKAGES,
@@ -99,7 +100,15 @@ class SeedingTable(Table):
         if self.file is not None:
             if given or dens:
                 raise ValueError(f"file gives the particles; remove {given + dens}")
+            from mitpiv.io import read_particles_csv
+
+            if len(read_particles_csv(self.file, diameter_um=self.diameter_um)["positions_mm"]) == 0:
+                raise ValueError(f"file = {Path(self.file).name!r} holds no particles (a header without rows): "
+                                 "nothing to render; add rows x_mm, y_mm, z_mm or seed a box (count = N)")
             return self
+        if self.count == 0:
+            raise ValueError("count = 0 seeds no particles: nothing to render (the renderer cannot load an empty "
+                             "particle set); give count >= 1")
         if self.box_min_mm is None or self.box_max_mm is None:
             raise ValueError("box_min_mm and box_max_mm are required (or file = a particle list)")
         if len(given) + (1 if dens else 0) != 1:
@@ -145,6 +154,15 @@ def _sensor_table():
         @model_validator(mode="after")
         def _physics(self):
             SensorModel(**self.model_dump())  # its own range checks (ConfigError -> ValueError)
+            noise = [k for k in ("gaussian_noise_percent", "read_noise_e") if getattr(self, k)] + (
+                ["dark_current_e_per_s"] if self.dark_current_e_per_s * self.exposure_time_s else [])
+            if (self.bit_depth is not None and noise and self.exposure is None and self.peak_photons is None
+                    and self.illumination_time_s is None):
+                raise ValueError(
+                    f"bit_depth = {self.bit_depth} with noise ({', '.join(noise)}) but no 'exposure', 'peak_photons' or "
+                    f"'illumination_time_s': the rendered radiance (~1e-5) would be taken as photons and round to 0 "
+                    f"counts, leaving images of pure noise; give peak_photons (e.g. 2000), exposure or "
+                    f"illumination_time_s")
             return self
 
     SensorTable.__doc__ = base.__doc__
@@ -241,6 +259,20 @@ class _Experiment(Table):
         return self
 
 
+def check_piv_windows(cfg) -> None:
+    """The PIV stage's check (run before a run that reaches it starts): every window fits
+    the reconstruction grid (``piv3d`` refuses a larger one, after the render and the
+    reconstruction)."""
+    nz, ny, nx = grid_of(cfg).shape
+    for w in cfg.piv.windows:
+        wx, wy, wz = w if isinstance(w, tuple) else (w, w, w)
+        if wx > nx or wy > ny or wz > nz:
+            raise ConfigError(f"experiment {cfg.name!r}: [piv] windows: {wx}x{wy}x{wz} voxels (x, y, z) do not fit the "
+                              f"reconstruction grid of {nx}x{ny}x{nz} voxels ([reconstruction] bounds_mm / voxel_mm); "
+                              f"give windows no larger than the volume, or larger bounds / smaller voxels (or stop "
+                              f"the run before the PIV).")
+
+
 class OutputTable(Table):
     """Extra files a run writes beside its report."""
 
@@ -255,7 +287,8 @@ def schema():
 
     fields = {
         "kind": (Literal["tomo"], Field("tomo", description="experiment kind")),
-        "name": (str, Field(..., description="experiment name (default: the file name)")),
+        "name": (Annotated[str, Field(min_length=1)], Field(..., description="experiment name (default: the file "
+                                                                             "name)")),
         "seed": (Annotated[int, Field(ge=0, lt=2**63)], Field(0, description="experiment seed (every random stream "
                                                                               "derives from it)")),
         "scene": (SceneTable, Field(..., description="the scene")),
@@ -368,6 +401,7 @@ def camera_budget(metas: list[dict]) -> dict:
 def stage_sensor(ctx: StageContext) -> dict:
     from mitpiv.imaging import SensorModel, apply_sensor_set
     from mitpiv.io import write_exr
+    from mitpiv.photometry import cameras_from_metadata, wavelength_from_metadata
 
     cfg = ctx.cfg
     model = SensorModel(**cfg.sensor.model_dump())
@@ -377,12 +411,17 @@ def stage_sensor(ctx: StageContext) -> dict:
         for img, meta, f in zip(imgs, ms, files, strict=True):
             key = (meta.get("sensor_id") or f.stem.rsplit("_frame", 1)[0], frame)
             rendered[key], metas[key], names[key] = img, meta, f.name
+    # each camera's counts follow its aperture (photometry "auto": when every camera states one)
+    by_cam = {k[0]: metas[k] for k in metas}
+    cameras = None if model.photometry == "image" else cameras_from_metadata(by_cam)
     # every image without particle signal (no exposure: radiance rounds to 0 counts) is refused
-    res = apply_sensor_set(rendered, model, seed=cfg.seed, progress=ctx.progress, on_degenerate="raise")
+    res = apply_sensor_set(rendered, model, seed=cfg.seed, progress=ctx.progress, on_degenerate="raise",
+                           cameras=cameras, wavelength_nm=wavelength_from_metadata(list(metas.values())))
     for key, c in res.counts.items():
         write_exr(ctx.out / names[key], np.asarray(c, dtype=np.float32),
                   {**metas[key], "sensor": res.metadata(key)})
-    return {"exposure": res.exposure, "scene_peak": res.scene_peak, "noise_peak_counts": res.noise_peak_counts}
+    return {"exposure": res.exposure, "exposure_units": res.exposure_units, "photometry": res.photometry,
+            "etendue_axis": res.etendue_axis, "scene_peak": res.scene_peak, "noise_peak_counts": res.noise_peak_counts}
 
 
 def _undistorted(meta: dict) -> dict:
@@ -507,7 +546,7 @@ def stages(cfg) -> list[Stage]:
         out.append(Stage("sensor", ("sensor",), stage_sensor))
     out += [Stage("reconstruct", ("reconstruction",), stage_reconstruct),
             Stage("evaluate", ("particles",), stage_evaluate),
-            Stage("piv", ("piv",), stage_piv),
+            Stage("piv", ("piv",), stage_piv, check=check_piv_windows),
             Stage("report", (), stage_report)]
     if cfg.output.vtk:
         out.append(Stage("vtk", ("output",), stage_vtk))
@@ -549,4 +588,5 @@ def headline(m: dict) -> str:
 
 
 KIND = Kind(name="tomo", build_schema=schema, stages=stages, summary=summary, row=row, aliases=("particles",),
-            prepare=prepare, headline=headline, describe="particle images, reconstruction, particles and 3D PIV")
+            prepare=prepare, headline=headline, describe="particle images, reconstruction, particles and 3D PIV",
+            columns=("frame0.*", "frame1.*", "piv.*", "n_particles", "cameras.n", "cameras.type", "cameras.pixels"))
