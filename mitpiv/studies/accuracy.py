@@ -10,13 +10,15 @@ field for the light-field stage. Each stage's knobs are varied one at a time, th
 knobs at their reference values, and each stage is measured alone:
 
 * ``render`` (camera 0, frame 0; error = relative L1 image error against particle tracing
-  with a 8192-angle phase table and the FFT PSF at 15 samples per pixel):
+  with a phase table at tolerance 1e-5 and the FFT PSF at 15 samples per pixel):
   camera tracing (``direct``, FFT PSF at the default 5 samples per pixel: camera tracing
   renders the oversampled film, so its cost grows with the square of the oversampling)
   against samples per pixel; particle tracing with the
   in-sensor PSF jitter against rays per particle; particle tracing with the FFT PSF
-  against ``psf_oversample`` (PSF and pupil sampling); the Mie phase-table resolution
-  (``angles``). Time: scene load (phase tables, PSF) plus render.
+  against ``psf_oversample`` (PSF and pupil sampling); the Mie phase table's
+  ``tolerance`` (its nodes chosen for that relative accuracy at every angle; the default
+  1e-3) and, for comparison, fixed ``angles`` grids. Time: scene load (phase tables, PSF)
+  plus render.
 * ``lightfield`` (error = RMS depth error [mm] of the particles, each the brightest voxel
   of its column in the multiplicative volumetric refocus with a 3-point sub-plane fit,
   against their true depth): decoder interpolation; focal-plane count. Time: decode plus
@@ -53,17 +55,17 @@ STAGES = ("render", "lightfield", "reconstruct", "piv", "end_to_end")
 # the README figures come from (about 15 minutes on 2 cores).
 SIZES = {
     "quick": dict(res=96, box=(7.0, 7.0, 3.2), voxel=0.11, spp=(1, 4, 16), rays=(4, 16, 64), psf_os=(1, 3),
-                  angles=(32, 128, 512), mart=(1, 3), smart=(2, 6), lf_res=160, lf_particles=6, lf_rays=20000,
+                  mie_tol=(1e-1, 1e-2, 1e-3), angles=(128, 1024), mart=(1, 3), smart=(2, 6), lf_res=160, lf_particles=6, lf_rays=20000,
                   lf_planes=(9, 17, 33), lf_ref_planes=65, piv=((16,), (12,), (24, 16)), piv_final=(16, 12),
                   e2e=("fast", "default")),
     "full": dict(res=256, box=(20.0, 20.0, 6.0), voxel=0.11, spp=(1, 4, 16, 64, 256), rays=(4, 16, 64, 256, 1024),
-                 psf_os=(1, 3, 5, 9), angles=(32, 128, 512, 2048), mart=(1, 2, 5, 10), smart=(2, 5, 10, 20),
+                 psf_os=(1, 3, 5, 9), mie_tol=(1e-1, 1e-2, 1e-3, 1e-4), angles=(128, 1024, 4096), mart=(1, 2, 5, 10), smart=(2, 5, 10, 20),
                  lf_res=300, lf_particles=16, lf_rays=100000, lf_planes=(11, 21, 41, 81, 161), lf_ref_planes=321,
                  piv=((32,), (24,), (16,), (32, 24), (48, 32, 24), (48, 32, 24, 16)), piv_final=(24, 16),
                  e2e=("fast", "camera", "default", "accurate")),
 }
-REF = {"angles": 8192, "psf_oversample": 15}
-DEFAULT = {"spp": 16, "rays_per_particle": 16, "psf_oversample": 5, "angles": 1024}
+REF = {"tolerance": 1e-5, "psf_oversample": 15}
+DEFAULT = {"spp": 16, "rays_per_particle": 16, "psf_oversample": 5, "tolerance": 1e-3}  # the plugins' defaults
 PPP = 0.05
 _CAMS = ((25.0, 55.0), (-25.0, 55.0), (155.0, 55.0), (-155.0, 55.0))
 _PSF = {"psf_f_number": 16.0, "psf_magnification": 0.093, "psf_energy_tolerance": 0.005}
@@ -130,7 +132,7 @@ class _Scene:
                     for k, p in enumerate(self.positions)]
 
     def scene(self, frame=0, *, integrator="particle_tracer", rays=None, psf="fft", psf_oversample=None,
-              angles=None, cameras=(0, 1, 2, 3)):
+              tolerance=None, angles=None, cameras=(0, 1, 2, 3)):
         import mitsuba as mi  # noqa: F401  (variant set by accuracy_time: ensure_variant)
 
         from mitpiv.render.scene import load_dict
@@ -145,8 +147,9 @@ class _Scene:
              "particles": {"type": "ellipsoidsmesh", "filename": str(self.ply[frame]), "extent": 1.0,
                            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}},
                            "emitter": {"type": "tracer_particles", "sheet": {"type": "ref", "id": "laser"},
-                                       "phase": {"type": "mie", "index": 1.45,
-                                                 "angles": int(angles or DEFAULT["angles"])}}}}
+                                       "phase": {"type": "mie", "index": 1.45, **(
+                                           {"angles": int(angles)} if angles is not None else
+                                           {"tolerance": float(tolerance or DEFAULT["tolerance"])})}}}}
         for k in cameras:
             az, el = _CAMS[k]
             s = {"type": "distorted_pinhole", "id": f"cam{k}", "azimuth_deg": az, "elevation_deg": el,
@@ -184,18 +187,20 @@ def _stage_render(S: _Scene) -> list[Row]:
         (imgs, _), t = _timed(S.render, sc, spp=spp, seed=1)
         return imgs[0], t_load + t
 
-    ref, t_ref = one(psf_oversample=REF["psf_oversample"], angles=REF["angles"])
-    rows = [Row("render", "reference: particle tracing, FFT PSF", f"os {REF['psf_oversample']}, {REF['angles']} angles",
-                t_ref, 0.0, "L1 image error")]
+    ref, t_ref = one(psf_oversample=REF["psf_oversample"], tolerance=REF["tolerance"])
+    rows = [Row("render", "reference: particle tracing, FFT PSF",
+                f"os {REF['psf_oversample']}, Mie tolerance {REF['tolerance']:g}", t_ref, 0.0, "L1 image error")]
     # camera tracing samples the PSF's oversampled film (psf_oversample^2 film pixels per
     # pixel, each with spp samples): it runs at the default oversampling
     series = [("camera tracing (spp, psf_oversample 5)", "spp", p["spp"],
-               lambda v: one(integrator="direct", spp=v, angles=REF["angles"])),
+               lambda v: one(integrator="direct", spp=v, tolerance=REF["tolerance"])),
               ("particle tracing, PSF jitter (rays per particle)", "rays", p["rays"],
-               lambda v: one(psf="jitter", rays=v, angles=REF["angles"])),
+               lambda v: one(psf="jitter", rays=v, tolerance=REF["tolerance"])),
               ("particle tracing, FFT PSF (psf_oversample)", "os", p["psf_os"],
-               lambda v: one(psf_oversample=v, angles=REF["angles"])),
-              ("Mie phase table (angles)", "angles", p["angles"],
+               lambda v: one(psf_oversample=v, tolerance=REF["tolerance"])),
+              ("Mie phase table (tolerance, default 1e-3)", "tol", p["mie_tol"],
+               lambda v: one(psf_oversample=REF["psf_oversample"], tolerance=v)),
+              ("Mie phase table (fixed angles)", "angles", p["angles"],
                lambda v: one(psf_oversample=REF["psf_oversample"], angles=v))]
     for knob, _, values, fn in series:
         fn(values[0])  # warm-up: kernel compilation of this configuration
@@ -332,13 +337,13 @@ def _stage_piv(S: _Scene) -> list[Row]:
 def _e2e_configs(S: _Scene) -> dict:
     f = S.p["piv_final"]
     return {
-        "fast": dict(integrator="particle_tracer", psf_oversample=1, angles=128, method="mlos", iterations=1,
+        "fast": dict(integrator="particle_tracer", psf_oversample=1, tolerance=1e-1, method="mlos", iterations=1,
                      windows=(f[0],)),
-        "camera": dict(integrator="direct", spp=16, psf_oversample=5, angles=1024, method="mart", iterations=5,
+        "camera": dict(integrator="direct", spp=16, psf_oversample=5, tolerance=1e-3, method="mart", iterations=5,
                        windows=(3 * f[0] // 2, f[0])),
-        "default": dict(integrator="particle_tracer", psf_oversample=5, angles=1024, method="mart", iterations=5,
+        "default": dict(integrator="particle_tracer", psf_oversample=5, tolerance=1e-3, method="mart", iterations=5,
                         windows=(3 * f[0] // 2, f[0])),
-        "accurate": dict(integrator="particle_tracer", psf_oversample=9, angles=4096, method="smart", iterations=20,
+        "accurate": dict(integrator="particle_tracer", psf_oversample=9, tolerance=1e-4, method="smart", iterations=20,
                          windows=(3 * f[0] // 2, f[0], f[1])),
     }
 
@@ -355,7 +360,7 @@ def _stage_end_to_end(S: _Scene) -> list[Row]:
         vols = []
         for frame in (0, 1):
             sc, t0 = _timed(S.scene, frame, integrator=c["integrator"], psf_oversample=c["psf_oversample"],
-                            angles=c["angles"])
+                            tolerance=c["tolerance"])
             (imgs, maps), t1 = _timed(S.render, sc, spp=c.get("spp", 0), seed=frame + 1)
             (vol, _), t2 = _timed(reconstruct_volume, imgs, maps, S.grid, c["method"], iterations=c["iterations"])
             times["render"] += t0 + t1
@@ -365,7 +370,7 @@ def _stage_end_to_end(S: _Scene) -> list[Row]:
         e = _velocity_rms(field, S)
         total = sum(times.values())
         desc = (f"{'camera tracing ' + str(c['spp']) + ' spp' if c['integrator'] == 'direct' else 'particle tracing'}, "
-                f"psf_oversample {c['psf_oversample']}, {c['angles']} angles, {c['method'].upper()}"
+                f"psf_oversample {c['psf_oversample']}, Mie tolerance {c['tolerance']:g}, {c['method'].upper()}"
                 f"{'' if c['method'] == 'mlos' else ' ' + str(c['iterations'])}, windows "
                 f"{'-'.join(map(str, c['windows']))}")
         note = ", ".join(f"{k} {v:.1f} s" for k, v in times.items())
