@@ -252,12 +252,21 @@ def write_collection(path, entries: Sequence[tuple]) -> Path:
         raise ConfigError("write_collection: give at least one (file, time_s[, part]) entry.")
     from pyevtk.vtk import VtkGroup
 
+    rows = []
+    for e in entries:
+        f, t, part, name = (*e, 0, "", "")[:4] if len(e) == 2 else (*e, "")[:4]
+        full = Path(f) if Path(f).is_absolute() else path.parent / f
+        if not full.is_file():  # what ParaView would not find (e.g. a path relative to the working folder)
+            raise ConfigError(
+                f"write_collection: entry {str(f)!r} is not a file: a relative entry is taken relative to the "
+                f"collection's folder {str(path.parent)!r} (where ParaView looks), i.e. {str(full)!r}. Write the "
+                f"file first and give its path relative to that folder (e.g. {Path(f).name!r}) or an absolute path.")
+        rows.append((full, t, part, name))
+
     def write(stem):
-        g = VtkGroup(stem)
-        for e in entries:
-            f, t, part, name = (*e, 0, "", "")[:4] if len(e) == 2 else (*e, "")[:4]
-            f = Path(f) if Path(f).is_absolute() else path.parent / f
-            g.addFile(filepath=str(f), sim_time=float(t), part=int(part), name=str(name))
+        g = VtkGroup(stem)  # stores each file relative to the folder of stem, which is path's folder
+        for full, t, part, name in rows:
+            g.addFile(filepath=str(full), sim_time=float(t), part=int(part), name=str(name))
         g.save()
 
     return _write(path, ".pvd", write)

@@ -155,6 +155,8 @@ def export_vtk(run_dir, out_dir=None, *, progress: Progress = None) -> list[Path
     out = Path(out_dir) if out_dir is not None else run / "vtk"
     truth = read_truth(run / "particles" / "truth.npz")
     times = [float(t) for t in truth["times_s"]]
+    # pvd: the collection's entries by file name, relative to run.pvd's folder (``out``, where every file
+    # lies): what ParaView resolves, wherever the folder is (the vtk stage's temporary folder is renamed)
     files, pvd = [], []
     with bar(8, desc="vtk export", progress=progress, unit="file") as b:
         for frame in (0, 1):
@@ -164,7 +166,7 @@ def export_vtk(run_dir, out_dir=None, *, progress: Progress = None) -> list[Path
                                     {"reconstructed": vol.astype(np.float32),
                                      "true": truth_volume(p_true, grid).astype(np.float32)})
             files.append(f)
-            pvd.append((f, times[frame], 0, "volume"))
+            pvd.append((f.name, times[frame], 0, "volume"))
             b.update()
             m = MatchResult.load(run / "evaluate" / f"matches_{frame}.npz")
             found = found_positions(run, exp, frame, m)
@@ -176,7 +178,7 @@ def export_vtk(run_dir, out_dir=None, *, progress: Progress = None) -> list[Path
                 "match": pe["found_match"], "error_mm": pe["found_error_mm"],
                 "error_magnitude_mm": _magnitude(pe["found_error_mm"]), "truth_index": pe["found_truth_index"]})
             files += [f_true, f_found]
-            pvd += [(f_true, times[frame], 1, "particles_true"), (f_found, times[frame], 2, "particles_found")]
+            pvd += [(f_true.name, times[frame], 1, "particles_true"), (f_found.name, times[frame], 2, "particles_found")]
             b.update(2)
         field = VectorField.load(run / "piv" / "field.npz")
         err = read_velocity_error(run / "piv" / "velocity_error.npz")
@@ -206,7 +208,7 @@ def export_vtk(run_dir, out_dir=None, *, progress: Progress = None) -> list[Path
         files.append(f_tr)
         b.update()
         for t in times:
-            pvd += [(f, t, 3, "piv"), (f_tr, t, 4, "tracks_true")]
+            pvd += [(f.name, t, 3, "piv"), (f_tr.name, t, 4, "tracks_true")]
         files.append(vt.write_collection(out / "run.pvd", sorted(pvd, key=lambda x: (x[1], x[2]))))
         b.update()
     log.info("vtk export: %d files in %s (open run.pvd in ParaView)", len(files), out)

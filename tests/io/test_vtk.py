@@ -125,6 +125,23 @@ def test_collection_lists_files_relative_with_times(tmp_path):
         assert d.GetNumberOfPoints() == 8
 
 
+def test_collection_refuses_entries_that_do_not_resolve_from_its_folder(tmp_path, monkeypatch):
+    # a path relative to the working folder, not to the collection's: ParaView would look
+    # for sub/sub/v0.vti, so it is refused (naming the entry and the fix), nothing written
+    g = VoxelGrid((0, 0, 0), 1.0, (2, 2, 2))
+    monkeypatch.chdir(tmp_path)
+    mv.write_image_data("sub/v0.vti", g, {"a": np.zeros(g.shape)})
+    with pytest.raises(ConfigError, match=r"'sub/v0\.vti'.*collection's folder 'sub'.*'v0\.vti'"):
+        mv.write_collection("sub/all.pvd", [("sub/v0.vti", 0.0)])
+    with pytest.raises(ConfigError, match=r"'missing\.vti'"):
+        mv.write_collection("sub/all.pvd", [("v0.vti", 0.0), ("missing.vti", 0.5)])
+    assert sorted(p.name for p in (tmp_path / "sub").iterdir()) == ["v0.vti"]
+    # the file's name (relative to the collection) or its absolute path: both stored as 'v0.vti'
+    mv.write_collection("sub/all.pvd", [("v0.vti", 0.0), (tmp_path / "sub" / "v0.vti", 0.5)])
+    ds = ET.parse(tmp_path / "sub" / "all.pvd").getroot().findall("./Collection/DataSet")
+    assert [e.get("file") for e in ds] == ["v0.vti", "v0.vti"]
+
+
 def test_bad_inputs_write_nothing(tmp_path):
     g = VoxelGrid((0, 0, 0), 1.0, (2, 3, 4))
     with pytest.raises(ConfigError, match=r"'v'.*\(2, 3, 4\)"):
