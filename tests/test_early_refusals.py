@@ -194,3 +194,20 @@ def test_a_piv_window_larger_than_the_grid_is_refused_before_a_run_that_reaches_
     assert not (tmp_path / "full").exists() or not any((tmp_path / "full").iterdir())
     res = run_config(cfg, tmp_path / "part", until="particles")
     assert "particles" in res.stages
+
+
+def test_an_unknown_sensor_id_is_refused_before_rendering(tmp_path):
+    """[render] sensors naming no sensor of the scene: refused by --check and before a run's
+    first stage (it failed at the render, after the particles were seeded)."""
+    from mitpiv.studies import load_experiment, run_config
+    from mitpiv.studies.runner import check_experiment
+
+    from .studies.helpers import tiny_experiment
+
+    exp = tiny_experiment(tmp_path)
+    with pytest.raises(ConfigError, match=r"\['cam9'\] not in the scene .*'cam0', 'cam1', 'cam2', 'cam3'"):
+        check_experiment(exp, {"render.sensors": ["cam0", "cam9"]})
+    with pytest.raises(ConfigError, match="cam9"):
+        run_config(load_experiment(exp, {"render.sensors": ["cam9"]}), tmp_path / "run")
+    assert not (tmp_path / "run" / "particles").exists()
+    assert main(["run", str(exp), "--check", "--set", 'render.sensors=["cam8"]']) == 2

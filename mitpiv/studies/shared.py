@@ -36,7 +36,7 @@ from mitpiv.errors import ConfigError
 from mitpiv.progress import Progress
 from mitpiv.studies.schema import Table, discriminated, model_from_signature
 
-__all__ = ["RENDER_PACKAGES", "Stage", "StageContext", "Kind", "SceneTable", "flow_union", "resolve_scene_xml",
+__all__ = ["RENDER_PACKAGES", "Stage", "StageContext", "Kind", "SceneTable", "flow_union", "resolve_scene_xml", "check_scene_sensors",
            "resolve_table_file", "scene_files", "count_for_density", "frame_files", "images", "frame_images",
            "volume", "read_tracks", "run_truth", "grid_of", "source_of", "bounds_of", "null_metrics", "flatten",
            "fmt_metric", "pareto_front"]
@@ -248,6 +248,29 @@ def scene_files(cfg, *, frames: tuple[int, ...] = (0, 1)) -> list[Path]:
             if p not in out:
                 out.append(p)
     return out
+
+
+def check_scene_sensors(cfg) -> None:
+    """The render stage's check: every id in ``[render] sensors`` names a sensor of the scene
+    XML (read with the standard library; a scene that includes other files is left to the
+    render, which checks again)."""
+    import xml.etree.ElementTree as ET
+
+    wanted = getattr(cfg.render, "sensors", None)
+    if not wanted:
+        return
+    try:
+        root = ET.parse(Path(cfg.scene.xml)).getroot()
+    except (ET.ParseError, OSError):
+        return  # the render stage reports the broken file
+    if any(True for _ in root.iter("include")):
+        return
+    ids = [s.get("id") for s in root.iter("sensor")]
+    missing = [s for s in wanted if s not in ids]
+    if missing:
+        raise ConfigError(f"experiment {cfg.name!r}: [render] sensors: {missing} not in the scene {str(cfg.scene.xml)!r}; "
+                          f"its sensors are {[i for i in ids if i]}. Name sensors of the scene (or leave "
+                          f"[render] sensors out for all of them).")
 
 
 def count_for_density(cfg, out: Path, *, frames: tuple[int, ...] = (0, 1)) -> int:

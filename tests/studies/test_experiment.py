@@ -206,14 +206,15 @@ experiment = "exp.toml"
 [[points]]
 "reconstruction.iterations" = 3
 [[points]]
-"render.sensors" = ["camX"]
+"scene.params.thickness_mm" = -1.0
 [plot]
 x = "reconstruction.iterations"
 y = "frame0.Q"
 """, "study.toml")
     df = run_sweep(study, tmp_path / "sweep", workers=2)
     assert list(df["status"]) == ["ok", "ok", "error"]
-    assert "not in the scene" in df["error"].iloc[2] and df["frame0.Q"].iloc[:2].notna().all()
+    # a scene parameter is read by Mitsuba at the render: the third point fails there
+    assert "thickness" in df["error"].iloc[2] and df["frame0.Q"].iloc[:2].notna().all()
     q = df["frame0.Q"].iloc[:2]
     assert q.min() > 0.5 and q.iloc[0] != q.iloc[1]  # two reconstructions of the same seeded field
     for p in df["point"].iloc[:2]:

@@ -48,6 +48,7 @@ from mitpiv.studies.shared import (
     SceneTable,
     Stage,
     StageContext,
+    check_scene_sensors,
     count_for_density,
     flatten,
     flow_union,
@@ -541,7 +542,8 @@ def stages(cfg) -> list[Stage]:
     dens = _uses_density(cfg)
     out = [Stage("particles", ("seed", "seeding", "flow") + (("scene",) if dens else ()), stage_particles,
                  files=scene_files if dens else None, packages=RENDER_PACKAGES if dens else ()),
-           Stage("render", ("scene", "render"), stage_render, files=scene_files, packages=RENDER_PACKAGES)]
+           Stage("render", ("scene", "render"), stage_render, files=scene_files, packages=RENDER_PACKAGES,
+                 check=check_scene_sensors)]
     if cfg.sensor is not None:
         out.append(Stage("sensor", ("sensor",), stage_sensor))
     out += [Stage("reconstruct", ("reconstruction",), stage_reconstruct),

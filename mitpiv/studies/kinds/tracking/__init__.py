@@ -73,6 +73,7 @@ from mitpiv.studies.shared import (
     Stage,
     StageContext,
     bounds_of,
+    check_scene_sensors,
     count_for_density,
     flow_union,
     frame_images,
@@ -606,7 +607,8 @@ def stages(cfg) -> list[Stage]:
     dens = cfg.seeding.ppp is not None
     out = [Stage("field", ("seed", "seeding", "flow", "sequence") + (("scene", "render") if dens else ()), stage_field,
                  files=scene_files if dens else None, packages=RENDER_PACKAGES if dens else ()),
-           Stage("render", ("scene", "render"), stage_render, files=scene_files, packages=RENDER_PACKAGES),
+           Stage("render", ("scene", "render"), stage_render, files=scene_files, packages=RENDER_PACKAGES,
+                 check=check_scene_sensors),
            Stage("calibrate", ("calibration",), stage_calibrate),
            Stage("otf", ("otf", "tracking"), stage_otf),
            Stage("track", ("tracking", "flow"), stage_track),
