@@ -7,6 +7,10 @@ they cannot drift from the code and the files they show:
 
 - ``schema.md``: the experiment schema of every kind, :func:`mitpiv.studies.schema.describe`
   (the same text as ``mitpiv schema``);
+- ``scene_xml.md``: every parameter of every Mitsuba plugin (type, unit, default, range) and
+  its XML example, read from the plugins' module docstrings by
+  :func:`mitpiv.render.plugin_reference.reference_page`, with the placement figure
+  ``docs/figures/placement.png`` (made by ``python docs/figures/make_placement_figure.py``);
 - ``examples.md``: every script in ``examples/``, its docstring, its source and its figure
   (``docs/examples/<script>.png``, made by ``python examples/<script>.py``);
 - ``replications.md``, ``studies.md`` and ``benchmarks.md``: whatever exists under ``docs/replications/``,
@@ -70,6 +74,12 @@ def _schema_page() -> str:
         # one level down: the kind is a section of this page
         parts.append("\n".join(("#" + line) if line.startswith("#") else line for line in text.splitlines()))
     return "\n".join(parts) + "\n"
+
+
+def _scene_xml_page() -> str:
+    from mitpiv.render.plugin_reference import reference_page
+
+    return reference_page(figure="../figures/placement.png")
 
 
 def _examples_page() -> str:
@@ -146,6 +156,7 @@ def _benchmarks_page() -> str:
 
 def _generate(app) -> None:
     _write("schema.md", _schema_page())
+    _write("scene_xml.md", _scene_xml_page())
     _write("examples.md", _examples_page())
     _write("replications.md", _replications_page())
     _write("studies.md", _studies_page())

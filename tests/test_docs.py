@@ -35,6 +35,14 @@ def test_docs_build_without_warnings(tmp_path):
     for name in ("rays_per_particle", "focus_plane_normal", "apply_sensor_set", "calibrate_mla", "drt_mart",
                  "hybrid_detect", "calibrate_dewarp", "calibrate_otf", "compare_value", "ring_energies"):
         assert name in api, name
+    # the scene XML reference: every plugin's parameters from its docstring, the placement figure
+    xml_ref = (tmp_path / "_generated" / "scene_xml.html").read_text()
+    for name in ("distorted_pinhole", "plenoptic", "laser_sheet", "tracer_particles", "particle_tracer",
+                 "azimuth_deg", "elevation_deg", "distance_mm", "sheet_normal", "photometric_f_number",
+                 "psf_magnification", "mla_pitch_um", "irradiance", "rays_per_particle", "tolerance"):
+        assert f"<code class=\"docutils literal notranslate\"><span class=\"pre\">{name}</span></code>" in xml_ref, name
+    assert "placement.png" in xml_ref and (tmp_path / "_images" / "placement.png").is_file()
+    assert "scene_xml.html" in (tmp_path / "index.html").read_text()
     guide = (tmp_path / "guide.html").read_text()
     assert "Shake-The-Box" in guide and "api.html" in guide
     assert "ParaView" in (tmp_path / "getting-started.html").read_text()

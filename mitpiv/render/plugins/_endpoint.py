@@ -72,10 +72,14 @@ class MitpivSensor(_unsampled(mi.Sensor)):
 
     def _place(self, rd: PropertyReader, props: mi.Properties) -> bool:
         """Apply a placement around a target (:func:`~mitpiv.render.plugins._props.read_placement`)
-        to ``to_world``; True when the properties give one."""
+        to ``to_world``; True when the properties give one. :attr:`placement_distance_mm` is
+        then the placement's ``distance_mm`` (the camera looks at the target, so it is the
+        target's distance along the optical axis), else None (a bare ``to_world`` states none)."""
         placed = read_placement(rd, props)
+        self.placement_distance_mm = None
         if placed is not None:
             self.m_to_world = mi.Transform4f(placed)
+            self.placement_distance_mm = rd.float("distance_mm")
         return placed is not None
 
     def _to_world(self) -> np.ndarray:

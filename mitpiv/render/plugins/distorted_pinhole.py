@@ -3,11 +3,27 @@
 Parameters
 ----------
 to_world : transform [mm], default identity
-    Camera pose (Mitsuba convention: looks along +z, x left, y up). Rigid only.
-target, azimuth_deg, elevation_deg, distance_mm : point, float [mm, deg]
-    Alternative to ``to_world``: place the camera around ``target`` with
-    :func:`mitpiv.physics.camera.place_camera` (angles in the laser-sheet frame given
-    by ``laser_direction`` (1,0,0) and ``sheet_normal`` (0,0,1)).
+    Camera pose (Mitsuba convention: looks along +z, x left, y up; with
+    ``<lookat origin="..." target="..." up="..."/>`` the image's up is ``up`` projected on
+    the image plane). Rigid only. Not with a placement.
+target : point [mm], default (0, 0, 0)
+    Placement (instead of ``to_world``, by :func:`mitpiv.physics.camera.place_camera`):
+    the point the camera looks at.
+azimuth_deg : float [deg], required for a placement
+    Placement: angle in the sheet plane from ``laser_direction`` (e1) towards
+    ``sheet_normal x laser_direction`` (e2); 0 is downstream (forward scatter), 180
+    upstream (backward scatter).
+elevation_deg : float [deg], required for a placement
+    Placement: angle out of the sheet plane towards ``sheet_normal`` (e3). The camera
+    sits at ``target + distance_mm (cos(el) cos(az) e1 + cos(el) sin(az) e2 + sin(el) e3)``
+    and looks at ``target``; the image's up is e3 projected on the image plane, or e2 when
+    the camera looks within 8.1 deg of e3 (``|sin(el)| >= 0.99``).
+distance_mm : float [mm], required for a placement, range > 0
+    Placement: distance from ``target`` to the camera's pinhole (lens centre), which is
+    the target's distance along the optical axis.
+laser_direction, sheet_normal : vector; default (1, 0, 0), (0, 0, 1)
+    Placement only: the laser-sheet frame of the angles, e1 and e3 (``sheet_normal`` is
+    made orthogonal to ``laser_direction``; they must not be parallel).
 calibration : string, default none
     A user's OpenCV calibration (``.yml``/``.yaml``/``.xml``/``.json``: camera matrix,
     distortion, optionally rvec/tvec in mm; :func:`mitpiv.io.read_opencv_camera`)
@@ -23,14 +39,14 @@ calibration_camera : string, default the sensor's id
 calibration_volume_mm : string [mm], default the table's
     Polynomial table only: ``"x_min x_max y_min y_max z_min z_max"``, the calibration
     volume over which a pinhole + Brown-Conrady camera is fitted to the polynomial.
-calibration_max_residual_px : float [px], default 0.1
+calibration_max_residual_px : float [px], default 0.1, range > 0
     Largest reprojection error accepted for the renderable approximation of a DLT (skew,
     non-square pixels) or a polynomial (the fitted camera); beyond it loading fails.
-focal_length_mm : float [mm], default 50
+focal_length_mm : float [mm], default 50, range > 0
     Focal length (pinhole to image plane).
-pixel_pitch_um : float [um], default 10
+pixel_pitch_um : float [um], default 10, range > 0
     Pixel pitch. The film's width/height give the resolution.
-fov : float [deg]
+fov : float [deg], range (0, 180)
     Alternative to ``focal_length_mm``: horizontal field of view.
 principal_point_x_px, principal_point_y_px : float [px], default image centre
     Principal point (pixel (i, j) spans [i, i+1)).
@@ -40,7 +56,7 @@ distortion_percent : float [%]
     Alternative to ``k1``: radial shift at the image corner (positive = barrel).
 f_number : float, default none
     Thin-lens aperture (f / diameter); absent = ideal pinhole.
-photometric_f_number : float, default ``psf_f_number``
+photometric_f_number : float, default ``psf_f_number``, range > 0
     Pinhole only: the f-number whose aperture the camera collects light through, for the
     sensor model's aperture photometry (:mod:`mitpiv.photometry`), keeping the pinhole's
     infinite depth of field. A thin lens collects through its ``f_number``.
@@ -51,9 +67,9 @@ focus_plane_normal : vector, default optical axis
     ``focus_distance_mm`` (Scheimpflug; see :func:`mitpiv.physics.camera.scheimpflug`).
     The pixel mapping stays that of the untilted sensor; the importance carries the
     Jacobian of the tilted-plane mapping, so both transport strategies agree.
-near_clip, far_clip : float [mm]; default 0.01, 1e7
-    Clip distances along the optical axis.
-psf : string, default none
+near_clip, far_clip : float [mm]; default 0.01, 1e7; range > 0
+    Clip distances along the optical axis (``far_clip`` > ``near_clip``).
+psf : string, default none, one of ``none``, ``fft``, ``jitter``
     Diffraction/aberration PSF: ``none``, ``fft`` (space invariant: oversampled render,
     FFT convolution by :func:`mitpiv.render.render.render_sensor`; film filter
     ``catmullrom`` (best), ``lanczos`` or ``tent``) or
@@ -61,10 +77,18 @@ psf : string, default none
     ``box``). See :class:`mitpiv.imaging.RenderPSF`. ``fft`` happens after rendering:
     ``mi.render`` alone returns the image without it; use ``render_sensor`` or
     ``mitpiv.render_scene``.
-psf_f_number, psf_wavelength_nm, psf_magnification : float [--, nm, --]; default f_number, 532, thin-lens M
-    Diffraction f-number (default: the thin lens'), wavelength, and the magnification
-    for the working f-number ``N (1 + |M|)`` (default ``f / (focus - f)`` for a thin
-    lens, none for a pinhole).
+psf_f_number : float, default ``f_number``
+    Diffraction f-number (default: the thin lens'; a pinhole must give it).
+psf_wavelength_nm : float [nm], default 532
+    Wavelength of the diffraction PSF.
+psf_magnification : float, default from the focus or the placement
+    Magnification M of the working f-number ``N (1 + |M|)``. Not given: a thin lens'
+    ``f / (focus_distance_mm - f)``; a pinhole placed around a target, ``f / (d - f)``
+    with ``f`` the ``focal_length_mm`` and ``d > f`` the placement's ``distance_mm`` (the
+    target's distance along the optical axis; logged); a pinhole posed by ``to_world``
+    alone states no distance and gets none (the plain f-number ``N``, as M = 0). The
+    camera's ``describe()`` records it (``psf``) and where it came from
+    (``psf_magnification_from``).
 psf_zernike, psf_defocus_waves, psf_spherical_waves : string, float [waves RMS]; default none
     Wavefront: ``"noll:waves, ..."`` (e.g. ``"11:0.05, 8:0.02"``), plus shorthands for
     Noll 4 and 11.
@@ -172,7 +196,7 @@ class DistortedPinhole(MitpivSensor):
         self.far_clip = check_positive("far_clip", rd.float("far_clip", 1e7), owner="distorted_pinhole", unit="mm")
         if self.far_clip <= self.near_clip:
             raise ConfigError(f"distorted_pinhole: far_clip ({self.far_clip}) must exceed near_clip ({self.near_clip}).")
-        psf_props = _read_psf_props(rd, f_number, focus, focal, pitch)
+        psf_props = _read_psf_props(rd, f_number, focus, focal, pitch, distance_mm=self.placement_distance_mm)
         rd.finish()
 
         cam = PinholeCamera((w, h), focal, pitch, rotation=rotation, position_mm=position,
@@ -255,7 +279,8 @@ class DistortedPinhole(MitpivSensor):
             self.m_to_world = mi.Transform4f(cam.to_world_mitsuba())
         to_world = self._to_world()
         cam.rotation, cam.position_mm = PinholeCamera.rotation_from_mitsuba(to_world)
-        psf_props = _read_psf_props(rd, f_number, focus, cam.focal_length_mm, cam.pixel_pitch_um)
+        psf_props = _read_psf_props(rd, f_number, focus, cam.focal_length_mm, cam.pixel_pitch_um,
+                                    distance_mm=self.placement_distance_mm)
         rd.finish()
         self.distortion_percent = None
         self.calibration_file = path
@@ -271,6 +296,10 @@ class DistortedPinhole(MitpivSensor):
             if cam.f_number is None:
                 raise ConfigError("distorted_pinhole: 'focus_plane_normal' needs a thin lens ('f_number', 'focus_distance_mm').")
             self._focus_n = _focus_plane_local(focus_normal, to_world, cam)
+        psf_props = None if psf_props is None else dict(psf_props)
+        #: where the PSF's magnification came from (describe()): "given", "thin lens
+        #: focus_distance_mm", "placement distance_mm", or None (none: the plain f-number)
+        self.psf_magnification_from = None if psf_props is None else psf_props.pop("magnification_from")
         self.psf = None if psf_props is None else _make_psf(psf_props, film)
         self.m_needs_sample_3 = cam.f_number is not None or self.psf_mode == "jitter"
         if self.psf_mode == "jitter":
@@ -471,6 +500,7 @@ class DistortedPinhole(MitpivSensor):
         d["newton_iterations"] = self.newton_iterations
         d["focus_plane_normal_camera_mitsuba"] = None if self._focus_n is None else list(self._focus_n)
         d["psf"] = None if self.psf is None else self.psf.to_dict()
+        d["psf_magnification_from"] = self.psf_magnification_from
         d["photometric_f_number"] = self.photometric_f_number
         return d
 
@@ -514,8 +544,12 @@ def _photometric_f_number(rd, f_number):
     return check_positive("photometric_f_number", n, owner="distorted_pinhole")
 
 
-def _read_psf_props(rd, f_number, focus, focal, pitch):
-    """Read the psf_* properties (None when the scene asks for no PSF)."""
+def _read_psf_props(rd, f_number, focus, focal, pitch, *, distance_mm=None):
+    """Read the psf_* properties (None when the scene asks for no PSF). Without
+    ``psf_magnification`` the magnification is a thin lens' ``f / (focus - f)``, or a
+    pinhole's ``f / (d - f)`` with ``d = distance_mm`` the placement's distance to its target
+    (the camera looks at it: the distance along the optical axis), logged; a pinhole posed
+    by ``to_world`` alone has none. ``magnification_from`` says which."""
     mode = rd.string("psf", "none")
     names = ("psf_f_number", "psf_wavelength_nm", "psf_magnification", "psf_zernike", "psf_defocus_waves",
              "psf_spherical_waves", "psf_defocus_corner_waves", "psf_energy_tolerance", "psf_oversample",
@@ -529,8 +563,14 @@ def _read_psf_props(rd, f_number, focus, focal, pitch):
     if n is None:
         raise ConfigError("distorted_pinhole: psf needs 'psf_f_number' (the camera is a pinhole, without 'f_number').")
     mag = rd.float("psf_magnification", None)
+    source = None if mag is None else "given"
     if mag is None and f_number is not None and focus is not None and focal is not None and focus > focal:
-        mag = focal / (focus - focal)
+        mag, source = focal / (focus - focal), "thin lens focus_distance_mm"
+    elif mag is None and f_number is None and distance_mm is not None and focal is not None and distance_mm > focal:
+        mag, source = focal / (distance_mm - focal), "placement distance_mm"
+        logging.getLogger(__name__).info(
+            "distorted_pinhole: psf_magnification %.6g = f / (d - f) = %g / %g (focal_length_mm %g, the placement's "
+            "distance_mm %g; give 'psf_magnification' to override)", mag, focal, distance_mm - focal, focal, distance_mm)
     coefs = {}
     text = rd.string("psf_zernike", "")
     for item in filter(None, (t.strip() for t in text.split(","))):
@@ -547,7 +587,7 @@ def _read_psf_props(rd, f_number, focus, focal, pitch):
         if c:
             coefs[j] = coefs.get(j, 0.0) + c
     return dict(mode=mode, f_number=n, pixel_pitch_um=pitch, wavelength_nm=rd.float("psf_wavelength_nm", 532.0),
-                magnification=mag, zernike_coefficients=tuple(sorted(coefs.items())),
+                magnification=mag, magnification_from=source, zernike_coefficients=tuple(sorted(coefs.items())),
                 defocus_corner_waves=rd.float("psf_defocus_corner_waves", 0.0),
                 energy_tolerance=rd.float("psf_energy_tolerance", 1e-3), oversample=rd.int("psf_oversample", 5),
                 table_oversample=rd.int("psf_table_oversample", 8), field_levels=rd.int("psf_field_levels", 16))

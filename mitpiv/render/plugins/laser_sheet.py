@@ -8,17 +8,17 @@ direction : vector; default (1, 0, 0)
     Propagation direction of the laser light.
 normal : vector; default (0, 0, 1)
     Sheet normal (thickness direction); made orthogonal to ``direction``.
-thickness : float [mm], default 1.0
+thickness : float [mm], default 1.0, range > 0
     Sheet thickness: FWHM of the profile across the sheet.
-profile : string, default gaussian
+profile : string, default ``gaussian``, one of ``gaussian``, ``tophat``, ``supergaussian``
     ``gaussian`` | ``tophat`` | ``supergaussian``.
-order : float, default 2.0
+order : float, default 2.0, range > 0
     Super-Gaussian order: E = E0 2^(-(2|s|/t)^order).
-irradiance : float [W/mm^2], default 1.0
+irradiance : float [W/mm^2], default 1.0, range > 0
     Peak irradiance on the mid-plane.
-wavelength_nm : float [nm], default 532
+wavelength_nm : float [nm], default 532, range > 0
     Vacuum wavelength (used by wavelength-dependent scattering such as Mie).
-width : float [mm], default unbounded
+width : float [mm], default unbounded, range > 0
     Optional full width of the sheet in the plane (top-hat edges, centred on
     ``origin``, measured along ``normal x direction``).
 polarization : vector, default unpolarised

@@ -2,31 +2,31 @@
 
 Parameters
 ----------
-diameter_um : float [um], required outside ``tracer_particles``
+diameter_um : float [um], required outside ``tracer_particles``, range > 0
     Sphere diameter; with ``geometric_std`` the median of a log-normal distribution.
-geometric_std : float, default monodisperse
+geometric_std : float, default monodisperse, range > 1
     Geometric standard deviation (> 1) of a log-normal size distribution.
 diameters_um, weights : string [um, --]
     A discrete size distribution: comma-separated diameters and number weights.
-index : float, default 1.45
+index : float, default 1.45, range > 0
     Real part n of the particle index n + ik.
-index_imag : float, default 0
+index_imag : float, default 0, range >= 0
     Absorption k >= 0 of the particle index n + ik.
-medium_index : float, default 1.0
+medium_index : float, default 1.0, range > 0
     Real index of the surrounding medium (1.333 for water).
-wavelength_nm : float [nm]; default 532, or the laser's
+wavelength_nm : float [nm]; default 532, or the laser's; range > 0
     Vacuum wavelength. Nested in ``tracer_particles`` it defaults to the laser
     sheet's and must agree with it.
-tolerance : float, default 1e-3
+tolerance : float, default 1e-3, range 1e-6 to 0.1
     Relative tolerance of the table: its nodes in the scattering angle are chosen so
     that the interpolated phase function (parallel, perpendicular and unpolarised, as
     ``tracer_particles`` and this plugin evaluate them) is within ``tolerance`` of Mie
     theory at every angle, the deep minima included (range 1e-6 to 0.1; see Notes).
-angles : integer, default none (chosen for ``tolerance``)
+angles : integer, default none (chosen for ``tolerance``), range 16 to 4194304
     A fixed table resolution instead (16 to 4194304 nodes in the scattering angle; half
     of them in the forward peak for large particles, see
     :func:`mitpiv.physics.mie.angle_grid`). Not with ``tolerance``.
-size_step : float, default 0.02
+size_step : float, default 0.02, range > 0
     Nested in ``tracer_particles`` with per-particle diameters: spacing, in size
     parameter x, of the diameters tabulated for the per-particle lookup (linear
     interpolation between them).

@@ -2,7 +2,7 @@
 
 Parameters
 ----------
-rays_per_particle : integer, default 16
+rays_per_particle : integer, default 16, range >= 1
     Sensor samples per particle and pass (aperture points of a thin-lens camera, PSF
     offsets of a ``jitter`` PSF). A sensor without such samples (a pinhole) has a single
     direction to each particle, so it always uses 1 (at the sensor's centre sample).

@@ -9,17 +9,34 @@ preset : string, default none
     A reference camera of :data:`mitpiv.physics.plenoptic.PRESETS` (``lytro_like``,
     ``lfpiv_hex_{800,1600}_pmr{7,14,28}``); the other parameters override it. The film
     size must equal the preset's resolution.
-to_world / target, azimuth_deg, elevation_deg, distance_mm : transform / point, float [mm, deg]; default identity
-    Pose of the main lens (Mitsuba convention: looks along +z), as for ``distorted_pinhole``.
-focal_length_mm, f_number | aperture_diameter_mm, focus_distance_mm : float [mm, --], required
-    Main lens: focal length, aperture, object distance in focus on the MLA.
-pixel_pitch_um : float [um], required
+to_world : transform [mm], default identity
+    Pose of the main lens (Mitsuba convention: looks along +z, x left, y up), as for
+    ``distorted_pinhole``. Not with a placement.
+target : point [mm], default (0, 0, 0)
+    Placement (instead of ``to_world``, as for ``distorted_pinhole``): the point the main
+    lens looks at.
+azimuth_deg, elevation_deg : float [deg], required for a placement
+    Placement angles in the laser-sheet frame, as for ``distorted_pinhole``: azimuth in
+    the sheet plane from ``laser_direction``, elevation out of it towards ``sheet_normal``.
+distance_mm : float [mm], required for a placement, range > 0
+    Placement: distance from ``target`` to the main lens' centre, along the optical axis.
+laser_direction, sheet_normal : vector; default (1, 0, 0), (0, 0, 1)
+    Placement only: the laser-sheet frame of the angles.
+focal_length_mm : float [mm], required without a preset
+    Main-lens focal length.
+f_number : float, required without a preset (or ``aperture_diameter_mm``)
+    Main-lens aperture as an f-number. Not with ``aperture_diameter_mm``.
+aperture_diameter_mm : float [mm], required without a preset (or ``f_number``)
+    Main-lens aperture diameter, instead of ``f_number``.
+focus_distance_mm : float [mm], required without a preset
+    Object distance in focus on the MLA.
+pixel_pitch_um : float [um], required without a preset
     Sensor pixel pitch.
-mla_pitch_um : float [um], required
+mla_pitch_um : float [um], required without a preset
     Lenslet pitch.
 mla_focal_length_um : float [um], default f-number matched
     Lenslet focal length (default ``p s_i / D``).
-mla_layout : string, default ``rect``
+mla_layout : string, default ``rect``, one of ``rect``, ``hex``
     ``rect`` or ``hex``.
 mla_count_x, mla_count_y : integer, default fill the sensor
     Lenslets per row and rows.
@@ -30,11 +47,11 @@ k1, k2, k3 : float, default 0
     :class:`mitpiv.physics.plenoptic.PlenopticCamera`, ``distortion``). The pixel weights
     stay those of the undistorted lens (the distortion moves light; the irradiance change,
     ``O(k1 r^2)``, is not modelled).
-crosstalk_sample_fraction : float, default 0.8
+crosstalk_sample_fraction : float, default 0.8, range (0, 1)
     Camera tracing only, when neighbouring lenslets can light a pixel: the share of
     samples sent through the pixel's own lenslet (importance sampling; unbiased for any
     value in (0, 1)).
-far_clip : float [mm], default 1e7
+far_clip : float [mm], default 1e7, range > 0
     Ray length.
 
 Notes

@@ -4,14 +4,14 @@ Parameters
 ----------
 sheet : reference, default none
     The ``laser_sheet`` emitter that lights the particles (``<ref name="sheet" id="..."/>``).
-irradiance : float [W/mm^2], default 1.0
+irradiance : float [W/mm^2], default 1.0, range > 0
     Uniform irradiance when no ``sheet`` is given (incident along ``laser_direction``).
 laser_direction : vector; default (1, 0, 0)
     Propagation direction when no ``sheet`` is given.
-scattering_efficiency : float, default 2.0
+scattering_efficiency : float, default 2.0, range > 0
     Q_sca: C_sca = Q_sca pi d^2 / 4 (2 is the large-particle limit). Not with the
     ``mie`` phase, which computes C_sca.
-diameter_um : float [um], default 1.0
+diameter_um : float [um], default 1.0, range > 0
     Diameter used when the shape has no per-particle ``diameter`` attribute.
 (nested phase) : phase, default isotropic
     Angular distribution of the scattered light (any Mitsuba phase function).
