@@ -92,17 +92,47 @@ def model_from_signature(name: str, fn: Callable, *, skip: tuple[str, ...] = (),
     except Exception:  # noqa: BLE001 - unresolvable annotations fall back to the defaults
         hints = {}
     fields: dict[str, Any] = {}
+    meanings = docstring_meanings(inspect.getdoc(fn) or "")
     for p in sig.parameters.values():
         if p.name in skip or p.name == "self" or p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
             continue
         ann = _annotation_for(p, hints)
+        desc = meanings.get(p.name)
         if p.default is inspect.Parameter.empty:
-            fields[p.name] = (ann, Field(...))
+            fields[p.name] = (ann, Field(..., description=desc))
         else:
-            fields[p.name] = (ann, Field(p.default))
+            fields[p.name] = (ann, Field(p.default, description=desc))
     fields.update(extra_fields or {})
     model = create_model(name, __base__=base, __doc__=doc or (inspect.getdoc(fn) or "").split("\n\n")[0], **fields)
     return model
+
+
+def docstring_meanings(doc: str) -> dict[str, str]:
+    """Each parameter's text in a docstring's ``Parameters`` or ``Attributes`` section
+    (numpydoc layout: ``name[, name] : text`` at the section's indentation, continued on
+    more indented lines), joined into one line. Written by hand: numpydoc parses the same
+    layout but is a documentation dependency (it needs Sphinx), not a run-time one."""
+    out: dict[str, str] = {}
+    lines = doc.splitlines()
+    i = 0
+    while i < len(lines):
+        if lines[i].strip() in ("Parameters", "Attributes") and i + 1 < len(lines) and set(lines[i + 1].strip()) == {"-"}:
+            i += 2
+            names: list[str] = []
+            while i < len(lines) and lines[i].strip() and not (i + 1 < len(lines) and lines[i + 1].strip()
+                                                                and set(lines[i + 1].strip()) == {"-"}):
+                line = lines[i]
+                if not line[:1].isspace() and " : " in line:
+                    head, text = line.split(" : ", 1)
+                    names = [n.strip() for n in head.split(",") if n.strip()]
+                    for n in names:
+                        out[n] = text.strip()
+                elif line[:1].isspace() and names:
+                    for n in names:
+                        out[n] = f"{out[n]} {line.strip()}".strip()
+                i += 1
+        i += 1
+    return out
 
 
 def discriminated(models: Mapping[str, type[BaseModel]], *, key: str = "kind") -> Any:
