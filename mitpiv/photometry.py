@@ -108,7 +108,7 @@ def pixel_etendue(camera: dict, *, camera_id: str = "?") -> np.ndarray:
         describe (a native Mitsuba sensor).
     """
     from mitpiv.physics.camera import PinholeCamera
-    from mitpiv.physics.distortion import Distortion, distort_jacobian, undistort
+    from mitpiv.physics.distortion import distort_jacobian, undistort
 
     cam = _camera(camera, "pixel_etendue")
     kind = cam.get("type")
@@ -128,9 +128,8 @@ def pixel_etendue(camera: dict, *, camera_id: str = "?") -> np.ndarray:
     u = (np.arange(w) + 0.5 - cx) / fx
     v = (np.arange(h) + 0.5 - cy) / fx
     xd, yd = np.meshgrid(u, v)
-    d = Distortion(**cam["distortion"]) if isinstance(cam.get("distortion"), dict) else pc.distortion
-    x, y = undistort(xd, yd, d, iterations=int(cam.get("newton_iterations") or 20))
-    _, _, a, b, c, e = distort_jacobian(x, y, d)
+    x, y = undistort(xd, yd, pc.distortion, iterations=int(cam.get("newton_iterations") or 20))
+    _, _, a, b, c, e = distort_jacobian(x, y, pc.distortion)
     cos2 = 1.0 / (1.0 + x * x + y * y)
     # pi R^2 cos(alpha) * p^2 cos^3(alpha) / (f^2 |det J|) = G_axis cos^4(alpha) / |det J|
     return g0 * cos2 * cos2 / np.abs(a * e - b * c)
@@ -160,16 +159,11 @@ def cameras_from_metadata(metas, *, photometric_f_number: float | None = None) -
         if not isinstance(cam, dict):
             raise ConfigError(f"photometry: the image of camera {cid!r} has no camera record in its metadata; render it "
                               f"with mitpiv (mitpiv render), or use photometry = 'image'.")
-        if photometric_f_number is not None and cam.get("type") in _RADIANCE_CAMERAS and photometric_f_number_of(cam) is None:
+        if photometric_f_number is not None and cam.get("type") in _RADIANCE_CAMERAS and axis_etendue(cam) is None:
             cam = {**cam, "photometric_f_number": check_positive("photometric_f_number", photometric_f_number,
                                                                  owner="sensor")}
         out[cid] = cam
     return out
-
-
-def photometric_f_number_of(camera: dict) -> float | None:
-    """:func:`photometric_f_number`, None for a camera type without one."""
-    return photometric_f_number(camera) if camera.get("type") in _RADIANCE_CAMERAS else None
 
 
 def wavelength_from_metadata(metas) -> float | None:
