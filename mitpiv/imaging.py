@@ -79,28 +79,42 @@ class SensorModel:
 
     Attributes
     ----------
-    exposure : photons per pixel per unit of the exposed quantity (scene-wide): of the
-        rendered value with ``photometry = "image"``, per watt collected with "aperture".
-    peak_photons : alternative to ``exposure``: the maximum of the exposed quantity over
-        the whole set of images (all cameras and frames; one image: its own maximum)
-        becomes this many photons.
-    illumination_time_s : alternative to ``exposure``: photons from physics, an exposure of
+    exposure : float or None
+        Photons per pixel per unit of the exposed quantity (scene-wide): of the rendered
+        value with ``photometry = "image"``, per watt collected with "aperture".
+    peak_photons : float or None
+        Alternative to ``exposure``: the maximum of the exposed quantity over the whole set
+        of images (all cameras and frames; one image: its own maximum) becomes this many
+        photons.
+    illumination_time_s : float or None
+        Alternative to ``exposure``: photons from physics, an exposure of
         ``t lambda / (h c)`` photons per watt, ``t`` the time the sheet lights the particles
         within the exposure [s] (a pulsed laser's pulse duration); needs "aperture"
         photometry and the scene rendered at the sheet's real irradiance.
-    photometry : "auto", "aperture" or "image" (see the module docstring).
-    quantum_efficiency : electrons per photon, in (0, 1].
-    shot_noise : Poisson photon (shot) noise.
-    dark_current_e_per_s, exposure_time_s : dark electrons (Poisson) = rate x time.
-    full_well_e : saturation [electrons].
-    read_noise_e : Gaussian read noise [electrons RMS].
-    gain_e_per_count : conversion gain [electrons per count (ADU)].
-    black_level : offset added to the counts [ADU].
-    gaussian_noise_percent : white Gaussian noise with sigma = this percentage of ``peak``
-        [counts], as in tomographic PIV studies; the same sigma on every image of a set.
-    peak : reference of ``gaussian_noise_percent`` [counts]; default the noise-free peak
-        count of the whole set of images (``exposure * QE * scene_peak / gain``).
-    bit_depth : 8, 10, 12, 14 or 16; rounds and clips to the ADC range.
+    photometry : str
+        "auto", "aperture" or "image" (see the module docstring).
+    quantum_efficiency : float
+        Electrons per photon, in (0, 1].
+    shot_noise : bool
+        Poisson photon (shot) noise.
+    dark_current_e_per_s, exposure_time_s : float
+        Dark electrons (Poisson) = rate [electrons/s] x time [s].
+    full_well_e : float or None
+        Saturation [electrons].
+    read_noise_e : float
+        Gaussian read noise [electrons RMS].
+    gain_e_per_count : float
+        Conversion gain [electrons per count (ADU)].
+    black_level : float
+        Offset added to the counts [ADU].
+    gaussian_noise_percent : float
+        White Gaussian noise with sigma = this percentage of ``peak`` [counts], as in
+        tomographic PIV studies; the same sigma on every image of a set.
+    peak : float or None
+        Reference of ``gaussian_noise_percent`` [counts]; default the noise-free peak count
+        of the whole set of images (``exposure * QE * scene_peak / gain``).
+    bit_depth : int or None
+        8, 10, 12, 14 or 16; rounds and clips to the ADC range.
     """
 
     exposure: float | None = None

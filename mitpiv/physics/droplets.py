@@ -47,7 +47,35 @@ def drop_impact_field(n: int, *, crown_radius_mm: float = 1.0, crown_height_mm: 
     splash): azimuth uniform about the impact axis (+y), radius ~ crown_radius, height up to
     crown_height; log-normal diameters clipped to [d_min, d_max]; velocities radially
     outward and upward at about ``speed_mm_s``. Overlapping droplets are removed, so fewer
-    than ``n`` may be returned."""
+    than ``n`` may be returned.
+
+    Parameters
+    ----------
+    n : int
+        Number of droplets drawn (>= 1) before overlapping ones are removed.
+    crown_radius_mm : float
+        Crown radius [mm] (> 0): each droplet's distance from the impact axis is uniform in
+        0.8-1.6 times it.
+    crown_height_mm : float
+        Crown height [mm] (> 0): each droplet's height above the impact point (along +y) is
+        uniform in 0.1-1 times it.
+    median_diameter_mm : float
+        Median of the log-normal droplet diameters [mm] (> 0).
+    sigma_ln : float
+        Standard deviation of the natural log of the diameter (dimensionless).
+    d_min_mm, d_max_mm : float
+        The diameters are clipped to [d_min_mm, d_max_mm] [mm] (> 0, d_min_mm < d_max_mm).
+    speed_mm_s : float
+        Typical droplet speed [mm/s]: each speed is uniform in 0.6-1.4 times it, radially
+        outward and upward at an elevation of 15-60 degrees above the xz plane.
+    seed : int
+        Seed of the random draws.
+
+    Returns
+    -------
+    dict
+        ``positions_mm`` (M, 3), ``diameters_mm`` (M,) and ``velocities_mm_s`` (M, 3), M <= n.
+    """
     if int(n) != n or n < 1:
         raise ConfigError(f"drop_impact_field: n must be a positive integer, got {n!r}.")
     for k, v in (("crown_radius_mm", crown_radius_mm), ("crown_height_mm", crown_height_mm),
@@ -74,7 +102,33 @@ def pellet_field(n: int, *, diameter_mm: float = 2.0, box_mm=((-5, 5), (-5, 5), 
     """A sparse field of equal spheres (shotgun pellets) uniformly in ``box_mm`` ((x0, x1),
     (y0, y1), (z0, z1)), at least ``min_gap_mm`` apart, moving at ``velocity_mm_s`` with a
     Gaussian spread per component. With ``view_axis`` the gap is enforced between the
-    projections along that axis, so no two silhouettes overlap in a camera looking along it."""
+    projections along that axis, so no two silhouettes overlap in a camera looking along it.
+
+    Parameters
+    ----------
+    n : int
+        Number of pellets wanted (>= 1); a crowded box may give fewer.
+    diameter_mm : float
+        Diameter of every pellet [mm] (> 0).
+    box_mm : ((float, float), (float, float), (float, float))
+        The box the centres are drawn in, ((x0, x1), (y0, y1), (z0, z1)) [mm].
+    velocity_mm_s : (float, float, float)
+        Mean velocity of the pellets [mm/s].
+    spread_mm_s : float
+        Standard deviation of the Gaussian spread added to each velocity component [mm/s].
+    min_gap_mm : float
+        Smallest gap between two pellets' surfaces [mm].
+    view_axis : (float, float, float), optional
+        A viewing direction: the gap is enforced between the pellets' projections along it
+        (no two silhouettes overlap); default None, the gap in 3D.
+    seed : int
+        Seed of the random draws.
+
+    Returns
+    -------
+    dict
+        ``positions_mm`` (M, 3), ``diameters_mm`` (M,) and ``velocities_mm_s`` (M, 3), M <= n.
+    """
     if int(n) != n or n < 1:
         raise ConfigError(f"pellet_field: n must be a positive integer, got {n!r}.")
     diameter_mm = check_positive("diameter_mm", diameter_mm, owner="pellet_field", unit="mm")

@@ -63,7 +63,13 @@ class _Axisymmetric(Flow):
 
 
 class Uniform(Flow):
-    """Uniform translation ``u = velocity_mm_s``."""
+    """Uniform translation ``u = velocity_mm_s``.
+
+    Parameters
+    ----------
+    velocity_mm_s : (float, float, float)
+        The velocity of every point, at every time [mm/s]; default (1, 0, 0).
+    """
 
     kind = "uniform"
 
@@ -75,7 +81,18 @@ class Uniform(Flow):
 
 
 class SolidBody(_Axisymmetric):
-    """Solid-body rotation ``u = omega axis x (p - center)``, omega [rad/s]."""
+    """Solid-body rotation ``u = omega axis x (p - center)``, omega [rad/s].
+
+    Parameters
+    ----------
+    omega_rad_s : float
+        Angular velocity omega [rad/s]: the speed at distance ``r`` from the axis is
+        ``omega r``; positive turns right-handed about ``axis``.
+    center : (float, float, float)
+        A point on the rotation axis [mm]; default the origin.
+    axis : (float, float, float)
+        Direction of the rotation axis (any non-zero length; normalised); default +z.
+    """
 
     kind = "solid_body"
 
@@ -90,7 +107,22 @@ class SolidBody(_Axisymmetric):
 class LambOseen(_Axisymmetric):
     """Lamb-Oseen vortex: ``u_theta = G / (2 pi r) (1 - exp(-r^2 / rc^2))``.
 
-    circulation_mm2_s: G [mm^2/s]; core_radius_mm: rc [mm].
+    A straight, steady vortex with a Gaussian core: vorticity ``G / (pi rc^2) exp(-r^2 / rc^2)``
+    along ``axis``, no radial or axial velocity.
+
+    Parameters
+    ----------
+    circulation_mm2_s : float
+        Total circulation G [mm^2/s]: the line integral of the velocity round a circle far
+        outside the core (there ``u_theta = G / (2 pi r)``); positive turns right-handed about
+        ``axis``.
+    core_radius_mm : float
+        Core radius rc [mm] (> 0): the e-folding radius of the Gaussian vorticity; the
+        azimuthal speed peaks at ``r = 1.121 rc``.
+    center : (float, float, float)
+        A point on the vortex axis [mm]; default the origin.
+    axis : (float, float, float)
+        Direction of the vortex axis (any non-zero length; normalised); default +z.
     """
 
     kind = "lamb_oseen"
@@ -115,8 +147,26 @@ class Burgers(LambOseen):
     """Burgers vortex: ``u_r = -a r / 2``, ``u_z = a z``,
     ``u_theta = G / (2 pi r) (1 - exp(-a r^2 / (4 nu)))``.
 
-    strain_rate_1_s: a [1/s]; viscosity_mm2_s: nu [mm^2/s]. The core radius is
-    ``sqrt(4 nu / a)``.
+    ``r`` and ``z`` are measured from ``center`` (the stagnation point). The axial strain
+    stretches the vortex and balances its viscous spreading: a steady Lamb-Oseen core of
+    radius ``sqrt(4 nu / a)``.
+
+    Parameters
+    ----------
+    circulation_mm2_s : float
+        Total circulation G [mm^2/s] (far from the core ``u_theta = G / (2 pi r)``); positive
+        turns right-handed about ``axis``.
+    strain_rate_1_s : float
+        Axial strain rate a [1/s] (> 0) of the stretching flow: inflow ``u_r = -a r / 2``,
+        outflow ``u_z = a z`` along the axis.
+    viscosity_mm2_s : float
+        Kinematic viscosity nu [mm^2/s] (> 0; water 1, air 15); with ``a`` it sets the core
+        radius ``sqrt(4 nu / a)`` [mm].
+    center : (float, float, float)
+        The stagnation point on the vortex axis (``u = 0`` there) [mm]; default the origin.
+    axis : (float, float, float)
+        Direction of the vortex axis, along which the fluid flows out (any non-zero length;
+        normalised); default +z.
     """
 
     kind = "burgers"
@@ -147,6 +197,23 @@ class HillVortex(_Axisymmetric):
     ``u_z = U [(a/R)^5 (2 z^2 - r^2) / (2 a^2) - 1]``, ``u_r = 1.5 U (r z / a^2) (a/R)^5``.
     With ``frame="lab"`` (default) ``U`` is added along the axis (fluid at rest far away)
     and the vortex centre moves as ``center + U t axis``.
+
+    Parameters
+    ----------
+    radius_mm : float
+        Radius a of the spherical vortex [mm] (> 0).
+    speed_mm_s : float
+        Translation speed U of the vortex along ``axis`` [mm/s] (the free-stream speed in the
+        vortex frame); the fluid inside moves at up to 2.5 U in the lab frame.
+    center : (float, float, float)
+        Centre of the sphere at ``t = 0`` [mm] (in the lab frame it moves with ``U``);
+        default the origin.
+    axis : (float, float, float)
+        Direction of travel, the symmetry axis (any non-zero length; normalised); default +z.
+    frame : {'lab', 'vortex'}
+        ``"lab"``: fluid at rest far away, the vortex moves; ``"vortex"``: the steady field
+        in the frame moving with the vortex (a uniform stream ``-U axis`` far away).
+        Default ``"lab"``.
     """
 
     kind = "hill_vortex"
@@ -182,6 +249,30 @@ class VortexRing(_Axisymmetric):
     curl of a vector potential and hence exactly divergence-free; the filament is split
     into ``segments`` pieces. The ring moves at ``speed_mm_s``, by default Kelvin's
     self-induced speed ``G / (4 pi R) (ln(8 R / a) - 1/4)``.
+
+    Parameters
+    ----------
+    ring_radius_mm : float
+        Radius R of the ring's centreline (the filament) [mm] (> 0, larger than
+        ``core_radius_mm``).
+    circulation_mm2_s : float
+        Circulation G of the ring's core [mm^2/s]; positive: the fluid moves through the
+        ring along ``+axis`` and the ring travels along ``+axis``.
+    core_radius_mm : float
+        Core radius a [mm] (> 0): the smoothing length of the Rosenhead-Moore kernel, which
+        keeps the velocity finite on the filament.
+    center : (float, float, float)
+        Centre of the ring at ``t = 0`` [mm]; it moves as ``center + speed_mm_s t axis``.
+        Default the origin.
+    axis : (float, float, float)
+        Normal of the ring's plane, the direction of travel (any non-zero length;
+        normalised); default +z.
+    speed_mm_s : float, optional
+        Translation speed along ``axis`` [mm/s]; left out (None): Kelvin's self-induced
+        speed above.
+    segments : int
+        Number of straight pieces of the filament in the Biot-Savart sum (>= 1; the cost
+        grows linearly with it).
     """
 
     kind = "vortex_ring"
@@ -271,6 +362,19 @@ def _biot_savart_kernel():
 class ABC(Flow):
     """Arnold-Beltrami-Childress flow, scaled to millimetres:
     ``u = U0 (A sin(z/L) + C cos(y/L), B sin(x/L) + A cos(z/L), C sin(y/L) + B cos(x/L))``.
+
+    A steady, divergence-free Beltrami field (vorticity parallel to velocity), periodic over
+    ``2 pi L`` along each world axis, with chaotic streamlines for A, B, C all non-zero.
+
+    Parameters
+    ----------
+    A, B, C : float
+        Dimensionless amplitudes of the three Beltrami modes (A varies along z, B along x,
+        C along y).
+    length_mm : float
+        Length scale L [mm] (> 0); the period is ``2 pi L``.
+    speed_mm_s : float
+        Velocity scale U0 [mm/s] multiplying the amplitudes.
     """
 
     kind = "abc"
@@ -303,6 +407,19 @@ class RoundJet(_Axisymmetric):
     air 15). For a centreline speed ``U`` at distance ``z`` give ``K = 8 pi nu z U / 3``
     (:meth:`from_centerline`). Points at or upstream of the virtual origin (``z <= 0``) are
     outside the solution and raise :class:`ConfigError`.
+
+    Parameters
+    ----------
+    momentum_flux_mm4_s2 : float
+        Kinematic momentum flux K = J / rho [mm^4/s^2] (> 0), ``2 pi int u_z^2 r dr``; for
+        a centreline speed U at distance z, ``K = 8 pi nu z U / 3``.
+    viscosity_mm2_s : float
+        Kinematic viscosity nu [mm^2/s] (> 0; water 1, air 15).
+    center : (float, float, float)
+        The jet's virtual origin [mm]; every evaluated point must lie downstream of it
+        (``z > 0``). Default the origin.
+    axis : (float, float, float)
+        Direction of the jet (any non-zero length; normalised); default +z.
     """
 
     kind = "round_jet"
@@ -345,6 +462,14 @@ class GridFlow(Flow):
     The NPZ file holds 1D axes ``x``, ``y``, ``z`` [mm] (strictly increasing) and arrays
     ``u``, ``v``, ``w`` [mm/s] of shape (len(x), len(y), len(z)). Points outside the grid
     raise :class:`ConfigError` unless ``outside="zero"``.
+
+    Parameters
+    ----------
+    path : str
+        The NPZ file (a relative path is taken from the current working directory).
+    outside : {'error', 'zero'}
+        Points outside the grid: ``"error"`` raises :class:`ConfigError`, ``"zero"`` gives
+        them zero velocity. Default ``"error"``.
     """
 
     kind = "grid"
@@ -408,6 +533,38 @@ class Channel(Flow):
     Reynolds-stress tensor at every y+ in ``y_plus_range`` (default
     ``(max(60, y_c/2), min(Re_tau, 2 y_c))``); points outside it raise ConfigError.
     ``modes`` Fourier modes (cost is linear in it), ``seed`` the realisation.
+
+    Parameters
+    ----------
+    friction_velocity_mm_s : float
+        Friction velocity u_tau [mm/s] (> 0): the velocity scale (``u = u_tau U+``) and, with
+        ``viscosity_mm2_s``, the viscous length ``l_nu = nu / u_tau``.
+    viscosity_mm2_s : float
+        Kinematic viscosity nu [mm^2/s] (> 0; air 15.1, water 1.0).
+    center_y_plus : float
+        Wall distance y_c of ``center_mm`` in wall units (> 0, inside ``y_plus_range``),
+        where the turbulence's length scales and anisotropy are taken.
+    center_mm : (float, float, float)
+        The world point [mm] at wall distance ``center_y_plus``, origin of the streamwise and
+        spanwise coordinates. Default the origin.
+    streamwise : (float, float, float)
+        Direction of the mean flow (any non-zero length; normalised); default +x.
+    wall_normal : (float, float, float)
+        Direction from the wall into the channel, perpendicular to ``streamwise`` (any
+        non-zero length; normalised); default +z.
+    modes : int
+        Number of random Fourier modes of the synthetic turbulence (>= 16; the cost is linear
+        in it).
+    seed : int
+        The turbulence's realisation (seeds its wavevector directions, amplitudes and
+        phases).
+    y_plus_range : (float, float), optional
+        Wall distances y+ (wall units) where the field may be evaluated; the stress fit spans
+        them. Default ``(max(60, y_c / 2), min(Re_tau, 2 y_c))``.
+    profile : str
+        The shipped DNS profile table (mean velocity and Reynolds stresses;
+        :data:`mitpiv.physics.channel.PROFILES`). Default ``"delalamo2004_re934"`` (del Alamo
+        et al. 2004, Re_tau = 934).
     """
 
     kind = "channel"

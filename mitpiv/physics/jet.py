@@ -55,7 +55,36 @@ class NearFieldJet(Flow):
     """Round jet of diameter ``diameter_mm`` and exit speed ``exit_velocity_mm_s`` issuing
     from ``nozzle_mm`` along ``axis`` (unit), near field (``x/D`` about 0.5-3). Callable:
     ``jet.velocity(p_mm (N, 3), t_s) -> (N, 3) mm/s``. ``modes`` Fourier modes, ``seed``
-    the realisation, ``envelope`` scales the fluctuations (0: the mean flow only)."""
+    the realisation, ``envelope`` scales the fluctuations (0: the mean flow only).
+
+    Parameters
+    ----------
+    diameter_mm : float
+        Nozzle diameter D [mm] (> 0); the shear layer sits at radius ``D / 2``.
+    exit_velocity_mm_s : float
+        Exit velocity U_j [mm/s] (> 0), the speed of the potential core.
+    nozzle_mm : (float, float, float)
+        Centre of the nozzle exit [mm]; the axial distance x is measured from it and every
+        evaluated point must lie downstream (``x > 0``). Default the origin.
+    axis : (float, float, float)
+        Direction of the jet (any non-zero length; normalised); default +x.
+    spreading : float
+        Growth rate ``S_w = d delta_w / dx`` of the shear layer's vorticity thickness
+        (dimensionless, > 0). Default 0.18 (Brown & Roshko 1974).
+    envelope : float
+        Factor on the turbulent fluctuations (dimensionless, >= 0): 1 gives the published
+        r.m.s. profile (peak 0.158 U_j per component), 0 the mean flow only.
+    integral_scale_over_delta : float
+        Longitudinal integral scale L11 of the synthetic turbulence over the vorticity
+        thickness at ``reference_x_mm`` (dimensionless, > 0).
+    reference_x_mm : float, optional
+        Axial distance from the nozzle [mm] (> 0) at which the turbulence's length scale is
+        frozen; default one diameter.
+    modes : int
+        Number of random Fourier modes of the turbulence (>= 8).
+    seed : int
+        The turbulence's realisation (seeds its directions, amplitudes and phases).
+    """
 
     kind = "near_field_jet"
 

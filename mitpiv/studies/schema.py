@@ -27,7 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 from mitpiv.errors import ConfigError
 
 __all__ = ["Table", "Vec3", "model_from_signature", "validate", "format_errors", "parse_value", "set_dotted",
-           "apply_overrides", "describe", "read_toml", "discriminated", "models_in"]
+           "apply_overrides", "describe", "read_toml", "discriminated", "models_in", "LOADER_DEFAULTS"]
 
 
 class Table(BaseModel):
@@ -108,11 +108,13 @@ def model_from_signature(name: str, fn: Callable, *, skip: tuple[str, ...] = (),
 
 
 def docstring_meanings(doc: str) -> dict[str, str]:
-    """Each parameter's text in a docstring's ``Parameters`` or ``Attributes`` section
-    (numpydoc layout: ``name[, name] : text`` at the section's indentation, continued on
-    more indented lines), joined into one line. Written by hand: numpydoc parses the same
-    layout but is a documentation dependency (it needs Sphinx), not a run-time one."""
+    """Each parameter's description in a docstring's ``Parameters`` or ``Attributes``
+    section (numpydoc layout: ``name[, name] : type`` at the section's indentation, the
+    description on the more indented lines below), joined into one line; a parameter with
+    no description lines gives its type. Written by hand: numpydoc parses the same layout
+    but is a documentation dependency (it needs Sphinx), not a run-time one."""
     out: dict[str, str] = {}
+    described: set[str] = set()
     lines = doc.splitlines()
     i = 0
     while i < len(lines):
@@ -129,7 +131,8 @@ def docstring_meanings(doc: str) -> dict[str, str]:
                         out[n] = text.strip()
                 elif line[:1].isspace() and names:
                     for n in names:
-                        out[n] = f"{out[n]} {line.strip()}".strip()
+                        out[n] = f"{out[n] if n in described else ''} {line.strip()}".strip()
+                        described.add(n)
                 i += 1
         i += 1
     return out
@@ -362,11 +365,18 @@ def _range(fi) -> str:
     return ", ".join(out)
 
 
-def _default(fi) -> str:
+#: Top-level experiment keys that a kind's model requires but an experiment file may leave
+#: out, because the loader fills them in before validating
+#: (:func:`mitpiv.studies.runner.load_experiment`: ``name`` from the file's name); each with
+#: the default the reference shows instead of "required".
+LOADER_DEFAULTS: dict[str, str] = {"name": "(the file name)"}
+
+
+def _default(fi, loader_default: str | None = None) -> str:
     from pydantic_core import PydanticUndefined
 
     if fi.is_required():
-        return "required"
+        return loader_default or "required"
     d = fi.default if fi.default is not PydanticUndefined else (fi.default_factory() if fi.default_factory else None)
     if isinstance(d, BaseModel):
         return "(table)"
@@ -390,7 +400,7 @@ def describe(model: type[BaseModel], *, title: str | None = None) -> str:
         else:
             top.append((name, fi))
     lines += ["| key | type | default | range | meaning |", "|---|---|---|---|---|"]
-    lines += [_row(n, f) for n, f in top]
+    lines += [_row(n, f, LOADER_DEFAULTS.get(n)) for n, f in top]
     for label, m, fi in sections:
         lines += ["", f"## {label}", "", ((fi.description or m.__doc__ or "").strip().split("\n")[0]), "",
                   "| key | type | default | range | meaning |", "|---|---|---|---|---|"]
@@ -398,9 +408,10 @@ def describe(model: type[BaseModel], *, title: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _row(name, fi) -> str:
+def _row(name, fi, loader_default: str | None = None) -> str:
     desc = (fi.description or "").replace("|", "/").replace("\n", " ")
-    return f"| `{name}` | {_type_name(fi.annotation).replace('|', '/')} | {_default(fi).replace('|', '/')} | " \
+    default = _default(fi, loader_default).replace("|", "/")
+    return f"| `{name}` | {_type_name(fi.annotation).replace('|', '/')} | {default} | " \
            f"{_range(fi)} | {desc} |"
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from mitpiv.errors import ConfigError
 from mitpiv.studies import load_experiment
-from mitpiv.studies.kinds import get_kind
+from mitpiv.studies.kinds import KINDS, get_kind
 from mitpiv.studies.schema import describe, parse_value
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
@@ -189,8 +189,66 @@ def test_the_sensor_table_has_a_meaning_for_every_key():
     fields = _sensor_table().model_fields
     assert {k for k, f in fields.items() if not f.description} == set()
     assert "per watt" in fields["exposure"].description and "[electrons RMS]" in fields["read_noise_e"].description
-    assert "| `quantum_efficiency` | float | 1.0 |" in describe(get_kind("tomo").schema) and "electrons per photon" in \
+    assert "| `quantum_efficiency` | float | 1.0 |" in describe(get_kind("tomo").schema) and "Electrons per photon" in \
         describe(get_kind("tomo").schema)
     doc = "Title.\n\nParameters\n----------\na, b : float\n    Two lengths [mm],\n    in order.\nc : int\n\nNotes\n-----\nx : y\n"
-    assert docstring_meanings(doc) == {"a": "float Two lengths [mm], in order.", "b": "float Two lengths [mm], in order.",
+    assert docstring_meanings(doc) == {"a": "Two lengths [mm], in order.", "b": "Two lengths [mm], in order.",
                                        "c": "int"}
+
+
+def _empty_meanings(model, where: str = "") -> list[str]:
+    """Every field, at every depth of ``model`` (each member of a union of tables included),
+    whose meaning (pydantic ``description``) is empty, as ``table<Member>.key``."""
+    from mitpiv.studies.schema import models_in
+
+    out = []
+    for name, fi in model.model_fields.items():
+        key = f"{where}.{name}" if where else name
+        if not (fi.description or "").strip():
+            out.append(key)
+        members = models_in(fi.annotation)
+        for m in members:
+            out += _empty_meanings(m, f"{key}<{m.__name__}>" if len(members) > 1 else key)
+    return out
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_every_schema_field_of_every_kind_has_a_meaning(kind, capsys):
+    """`mitpiv schema` gives every key of every table a meaning: the flow tables' keys (from
+    the flow classes' numpydoc Parameters sections) and the [field] tables' (from the droplet
+    generators') were all empty."""
+    from mitpiv.cli import main
+
+    assert _empty_meanings(get_kind(kind).schema) == []
+    assert main(["schema", "--kind", kind]) == 0
+    rows = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("| `")]
+    assert rows and [ln for ln in rows if ln.endswith("|  |")] == []
+
+
+def test_flow_meanings_carry_units():
+    """The meanings name the physics and its unit as the flow code uses it."""
+    from mitpiv.studies.schema import models_in
+    from mitpiv.studies.shared import flow_union
+
+    flows = {typing.get_args(m.model_fields["kind"].annotation)[0]: m.model_fields
+             for m in models_in(flow_union())}
+    assert "[mm^2/s]" in flows["burgers"]["circulation_mm2_s"].description
+    assert "[1/s]" in flows["burgers"]["strain_rate_1_s"].description
+    assert "[mm]" in flows["lamb_oseen"]["core_radius_mm"].description
+    assert "[mm^4/s^2]" in flows["round_jet"]["momentum_flux_mm4_s2"].description
+    assert "[rad/s]" in flows["solid_body"]["omega_rad_s"].description
+
+
+def test_name_is_optional_as_the_loader_defaults_it(tmp_path):
+    """An experiment file without ``name`` loads, named after the file; the reference says so
+    instead of calling the key required."""
+    src = SCENES / "tomo4"
+    text = (src / "experiment.toml").read_text()
+    assert 'name = "tomo4"\n' in text
+    shutil.copytree(src, tmp_path / "tomo4", ignore=shutil.ignore_patterns("*.ply", "*.npz", "*.csv"))
+    p = tmp_path / "tomo4" / "my_run.toml"
+    p.write_text(text.replace('name = "tomo4"\n', ""))
+    assert load_experiment(p).name == "my_run"
+    for kind in ("tomo", "backlit", "tracking"):
+        row = [ln for ln in describe(get_kind(kind).schema).splitlines() if ln.startswith("| `name` |")]
+        assert len(row) == 1 and "| required |" not in row[0], row
