@@ -10,9 +10,9 @@ they cannot drift from the code and the files they show:
 - ``scene_xml.md``: every parameter of every Mitsuba plugin (type, unit, default, range) and
   its XML example, read from the plugins' module docstrings by
   :func:`mitpiv.render.plugin_reference.reference_page`, with the placement figure
-  ``docs/figures/placement.png`` (made by ``python docs/figures/make_placement_figure.py``);
-- ``examples.md``: every script in ``examples/``, its docstring, its source and its figure
-  (``docs/examples/<script>.png``, made by ``python examples/<script>.py``);
+  ``docs/figures/placement.png`` (made by ``.venv/bin/python docs/figures/make_placement_figure.py``);
+- ``examples.md``: every script in ``examples/``, its docstring, its source below the docstring
+  and its figure (``docs/examples/<script>.png``, made by ``.venv/bin/python examples/<script>.py``);
 - ``replications.md``, ``studies.md`` and ``benchmarks.md``: whatever exists under ``docs/replications/``,
   ``docs/studies/`` and
   ``docs/benchmarks.md`` (and the accuracy-versus-time report in ``docs/accuracy-time/``).
@@ -31,7 +31,8 @@ os.environ.setdefault("MITPIV_QUIET", "1")
 import mitpiv  # noqa: E402
 
 project = "mitpiv"
-author = "mitpiv contributors"
+author = "the mitpiv developers"
+copyright = f"2026, {author}"
 release = version = mitpiv.__version__ if hasattr(mitpiv, "__version__") else "0.1.0"
 extensions = ["myst_parser", "sphinx.ext.autodoc", "numpydoc", "sphinx.ext.mathjax"]
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
@@ -85,18 +86,29 @@ def _scene_xml_page() -> str:
 def _examples_page() -> str:
     parts = ["# Examples", "",
              "Short scripts to copy from, in `examples/` (each runs in under a minute at its default size; "
-             "`--small` is the quick size the test suite runs). Run them from the repository root, e.g. "
-             "`python examples/tomo_experiment.py`; they write into `out/examples/<name>/`.", ""]
+             "`--small` is the quick size the test suite runs). Run them from the repository root with the "
+             "virtual environment's Python (`make setup` makes it), e.g. "
+             "`.venv/bin/python examples/tomo_experiment.py`; they write into `out/examples/<name>/`.", ""]
     for script in sorted((ROOT / "examples").glob("*.py")):
         if script.name.startswith("_"):
             continue
-        doc = ast.get_docstring(ast.parse(script.read_text())) or script.stem
+        source = script.read_text()
+        tree = ast.parse(source)
+        doc = ast.get_docstring(tree) or script.stem
         first, _, rest = doc.partition("\n")
+        # the docstring is the prose above; the listing starts at the code after it
+        start = 1
+        if ast.get_docstring(tree) is not None:
+            lines = source.splitlines()
+            start = tree.body[0].end_lineno + 1
+            while start <= len(lines) and not lines[start - 1].strip():
+                start += 1
         parts += [f"## {script.stem.replace('_', ' ')}", "", first.strip(), rest.strip(), ""]
         fig = DOCS / "examples" / f"{script.stem}.png"
         if fig.is_file():
             parts += [f"![{script.stem}](../examples/{fig.name})", ""]
-        parts += ["```{literalinclude} " + f"../../examples/{script.name}", ":language: python", "```", ""]
+        parts += ["```{literalinclude} " + f"../../examples/{script.name}", ":language: python",
+                  f":lines: {start}-", "```", ""]
     return "\n".join(parts)
 
 
@@ -107,12 +119,17 @@ def _include(path: Path, *, heading_shift: bool = False, start_line: int = 0) ->
     return ["```{include} " + rel, *opts, "```", ""]
 
 
-def _include_report(path: Path) -> list[str]:
+def _include_report(path: Path, *, name: str = "") -> list[str]:
     """A report one heading level down. A replication report opens with its physics-row tally,
-    then its title: here the title comes first, then the tally, then the rest of the report."""
+    then its title: here the title comes first, then the tally, then the rest of the report.
+    ``name`` goes into the title (two studies of one kind share their report's title, and the
+    table of contents would list the same title twice)."""
     lines = path.read_text(encoding="utf-8").splitlines()
+    suffix = f" (`{name}`)" if name else ""
     if len(lines) > 2 and lines[2].startswith("# "):
-        return ["#" + lines[2], "", lines[0], "", *_include(path, heading_shift=True, start_line=3)]
+        return ["#" + lines[2] + suffix, "", lines[0], "", *_include(path, heading_shift=True, start_line=3)]
+    if name and lines and lines[0].startswith("# "):
+        return ["#" + lines[0] + suffix, "", *_include(path, heading_shift=True, start_line=1)]
     return _include(path, heading_shift=True)
 
 
@@ -137,7 +154,7 @@ def _studies_page() -> str:
     if not reports:
         parts += ["No study report has been committed yet.", ""]
     for r in reports:
-        parts += _include_report(r)
+        parts += _include_report(r, name=r.parent.relative_to(DOCS / "studies").as_posix())
     return "\n".join(parts)
 
 

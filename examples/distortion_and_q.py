@@ -3,8 +3,8 @@
 the cameras' true (distorted) model and with distortion left uncorrected (a pinhole
 calibration), and scored by Q against the true particle volume.
 
-    python examples/distortion_and_q.py            # 0, 2, 5 % at 160 px (~1 min)
-    python examples/distortion_and_q.py --small    # 0, 5 % at 64 px (seconds)
+    .venv/bin/python examples/distortion_and_q.py            # 0, 2, 5 % at 160 px (~1 min)
+    .venv/bin/python examples/distortion_and_q.py --small    # 0, 5 % at 64 px (seconds)
 
 Uncorrected distortion moves each camera's particle images by up to distortion x the
 half-diagonal (5 % at 160 px is 5.7 px at the corner); the lines of sight then miss each

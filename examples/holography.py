@@ -2,8 +2,8 @@
 collimated 532 nm laser, reconstruct it at several distances (angular spectrum), and find
 the droplets in 3D (position and size) from the focal stack.
 
-    python examples/holography.py            # 16 droplets, 600 x 600 px sensor (~20 s)
-    python examples/holography.py --small    # 4 droplets, 256 x 256 px (a few seconds)
+    .venv/bin/python examples/holography.py            # 16 droplets, 600 x 600 px sensor (~20 s)
+    .venv/bin/python examples/holography.py --small    # 4 droplets, 256 x 256 px (a few seconds)
 
 Writes holography.png: the hologram, the reconstruction at one droplet's depth, and the
 detected against the true droplets.

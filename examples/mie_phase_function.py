@@ -2,8 +2,8 @@
 camera at each scattering angle, for unpolarised and polarised light, and for a
 log-normal size distribution (which smooths the single-size ripples).
 
-    python examples/mie_phase_function.py --diameter-um 1.0 --index 1.45
-    python examples/mie_phase_function.py --diameter-um 10 --index 1.33   # a water droplet
+    .venv/bin/python examples/mie_phase_function.py --diameter-um 1.0 --index 1.45
+    .venv/bin/python examples/mie_phase_function.py --diameter-um 10 --index 1.33   # a water droplet
 
 Writes mie_phase_function.png and prints the scattering efficiency, cross-section and
 asymmetry parameter.

@@ -2,8 +2,8 @@
 depths through a microlens array, decode it into a 4D light field, and refocus it onto
 each particle's depth (synthetic refocusing: one exposure, any focal plane afterwards).
 
-    python examples/plenoptic_refocus.py            # 400 x 400 px raw image (~20 s)
-    python examples/plenoptic_refocus.py --small    # 200 x 200 px
+    .venv/bin/python examples/plenoptic_refocus.py            # 400 x 400 px raw image (~20 s)
+    .venv/bin/python examples/plenoptic_refocus.py --small    # 200 x 200 px
 
 Writes plenoptic_refocus.png: the raw image (one small disk image per lenslet) and the
 refocused images at the three particle depths, each particle sharp in its own plane.

@@ -2,10 +2,10 @@
 random seeds (each seed a new particle field), run in parallel on a local Dask cluster.
 The plot shows the mean over the seeds with error bars of one standard deviation.
 
-    python examples/sweep.py            # iterations 1, 3, 10 x 3 seeds, 128 px (~1 min on 2 cores)
-    python examples/sweep.py --small    # iterations 1, 3 x 2 seeds, 64 px, in this process
+    .venv/bin/python examples/sweep.py            # iterations 1, 3, 10 x 3 seeds, 128 px (~1 min on 2 cores)
+    .venv/bin/python examples/sweep.py --small    # iterations 1, 3 x 2 seeds, 80 px, in this process
 
-From the command line: ``mitpiv sweep study.toml --out out/study``. A rerun skips the
+From the command line: ``.venv/bin/mitpiv sweep study.toml --out out/study``. A rerun skips the
 points already done; a failed point is recorded in the table with its error.
 Writes results.csv / results.parquet (one row per point), sweep.png and a run folder
 per point (points/<id>/, each with its own report).
@@ -26,7 +26,7 @@ def main():
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     scene = Path(__file__).resolve().parents[1] / "scenes" / "tomo4" / "scene.xml"
-    resolution, iterations, seeds = (64, [1, 3], [1, 2]) if args.small else (128, [1, 3, 10], [1, 2, 3])
+    resolution, iterations, seeds = (80, [1, 3], [1, 2]) if args.small else (128, [1, 3, 10], [1, 2, 3])
 
     # The base experiment (see examples/tomo_experiment.py for every table).
     (out / "experiment.toml").write_text(f"""

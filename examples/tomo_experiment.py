@@ -3,11 +3,11 @@ vortex, rendered by the four cameras of scenes/tomo4, reconstructed by MART, par
 found and matched, 3D PIV, every result scored against the truth, a Markdown report with
 figures, and ParaView files.
 
-    python examples/tomo_experiment.py            # 256 px cameras, 2000 particles (~45 s)
-    python examples/tomo_experiment.py --small    # 96 px, 150 particles (seconds)
+    .venv/bin/python examples/tomo_experiment.py            # 256 px cameras, 2000 particles (~45 s)
+    .venv/bin/python examples/tomo_experiment.py --small    # 96 px, 150 particles (seconds)
 
 The same from the command line: write the TOML below to exp.toml and run
-``mitpiv run exp.toml --out out/exp``; ``mitpiv schema`` lists every key.
+``.venv/bin/mitpiv run exp.toml --out out/exp``; ``.venv/bin/mitpiv schema`` lists every key.
 Then open out/examples/tomo_experiment/run/report/report.md, and
 out/examples/tomo_experiment/run/vtk/run.pvd in ParaView.
 """

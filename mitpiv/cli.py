@@ -1,5 +1,5 @@
 """Command-line interface: ``mitpiv render``, ``info``, ``sensor``, ``decode``, ``refocus``,
-``reconstruct``, ``evaluate``, ``piv``, ``run``, ``schema``, ``sweep`` and ``bench``.
+``reconstruct``, ``evaluate``, ``piv``, ``run``, ``preview``, ``schema``, ``sweep`` and ``bench``.
 
 Thin: parses arguments, calls library functions, shows progress (``--quiet`` silences it),
 prints where results went. Errors from mitpiv print as one line and exit with status 2.
@@ -468,7 +468,8 @@ def cmd_evaluate(args) -> int:
     truth = _check_truth_frame(args.truth, args.frame)
     vol, grid, _ = read_volume(args.volume)
     metrics, res = analysis.evaluate_volume(vol, grid, truth["positions_mm"][args.frame], method=args.method,
-                                            threshold_rel=args.threshold_rel, radius_voxels=args.radius_voxels)
+                                            threshold_rel=args.threshold_rel, radius_voxels=args.radius_voxels,
+                                            threshold_of=args.threshold_of)
     out = {"volume": str(args.volume), "truth": str(args.truth), "frame": args.frame, "method": args.method, **metrics}
     s = out["particles"]
     q_rank = out["Q'"]
@@ -571,6 +572,21 @@ def cmd_run(args) -> int:
     _out_dir(args.out)
     result = run_experiment(args.experiment, args.out, overrides=overrides, progress=_progress(args))
     print(f"{result.headline()} -> {args.out}/report/report.md")
+    return 0
+
+
+def cmd_preview(args) -> int:
+    from mitpiv.studies.preview import preview
+
+    _out_dir(args.out)
+    res = preview(args.path, args.out, volume_mm=args.volume, params=_parse_define(args.define) or None,
+                  overrides=_run_overrides(args) or None)
+    print(f"{args.path}: rig.png, views.png, rig.vtu, rig.json -> {args.out}"
+          + (f" ({len(res['warnings'])} warning(s) above)" if res["warnings"] else ""))
+    if res["refused"]:
+        print("mitpiv preview: no point of the volume is seen by every camera; 'mitpiv run' refuses it (exit "
+              "status 1).", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -828,7 +844,11 @@ def main(argv=None) -> int:
     e.add_argument("--truth", required=True, help="truth .npz (particle positions per frame)")
     e.add_argument("--frame", type=_int_in(0), default=0, help="truth frame of the volume")
     e.add_argument("--method", choices=["gauss3", "centroid", "lsq"], default="gauss3", help="sub-voxel localisation")
-    e.add_argument("--threshold-rel", type=_float_in(0, 1, hi_open=True), default=0.1, help="peaks above this fraction of the maximum")
+    e.add_argument("--threshold-rel", type=_float_in(0, 1, hi_open=True), default=0.1,
+                   help="peaks above this fraction of the --threshold-of level")
+    e.add_argument("--threshold-of", choices=("robust", "max"), default="robust",
+                   help="the level --threshold-rel is a fraction of: 'robust' (the 99.99th percentile of the local "
+                        "maxima, at least the 50th brightest; default) or 'max' (the brightest voxel)")
     e.add_argument("--radius-voxels", type=_float_in(0, lo_open=True), default=2.0, help="matching search radius [voxels]")
     e.add_argument("--out", default=None, help="metrics .json (+ error PDF plot .png)")
     e.set_defaults(func=cmd_evaluate)
@@ -851,13 +871,25 @@ def main(argv=None) -> int:
     v.set_defaults(func=cmd_piv)
     x = sub.add_parser("run", help="run (or resume) an experiment TOML: render, reconstruct, evaluate, PIV, report")
     x.add_argument("experiment", help="experiment .toml")
-    x.add_argument("--out", default=None, help="run folder (stages resume when rerun)")
-    x.add_argument("--check", action="store_true", help="validate the experiment (every table) and run nothing")
+    need = x.add_mutually_exclusive_group(required=True)  # a run folder, or --check alone
+    need.add_argument("--out", default=None, metavar="DIR",
+                      help="run folder, required unless --check (stages resume when rerun)")
+    need.add_argument("--check", action="store_true", help="validate the experiment (every table) and run nothing")
     x.add_argument("--set", action="append", metavar="TABLE.FIELD=VALUE",
                    help="set any experiment field (a TOML value), e.g. --set piv.windows=[48,32]; see 'mitpiv schema'")
     for flag, key in RUN_FLAGS.items():
         x.add_argument(f"--{flag}", **_flag_kwargs(key))
     x.set_defaults(func=cmd_run)
+    pv = sub.add_parser("preview", help="draw a scene's or an experiment's rig (cameras, laser sheet, volume) before "
+                        "any render: rig.png, views.png, rig.vtu; warn as 'run --check' does")
+    pv.add_argument("path", help="scene XML or experiment TOML")
+    pv.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    pv.add_argument("--volume", type=_float_in(), nargs=6, default=None, metavar=("X0", "X1", "Y0", "Y1", "Z0", "Z1"),
+                    help="scene XML: the measurement volume [mm] (an experiment gives its own)")
+    pv.add_argument("-D", dest="define", action="append", metavar="NAME=VALUE", help="scene XML: parameter ($NAME)")
+    pv.add_argument("--set", action="append", metavar="TABLE.FIELD=VALUE",
+                    help="experiment: set any field, e.g. --set scene.params.resolution=256")
+    pv.set_defaults(func=cmd_preview)
     sc = sub.add_parser("schema", help="print every experiment table and field with its unit, default and range")
     sc.add_argument("--kind", default="tomo", help="experiment kind: tomo (default), backlit or tracking")
     sc.set_defaults(func=cmd_schema)
@@ -916,6 +948,7 @@ def main(argv=None) -> int:
     logging.getLogger("mitpiv").setLevel(level)
     for noisy in ("distributed", "numba", "matplotlib", "PIL"):  # other libraries stay at warnings
         logging.getLogger(noisy).setLevel(max(level, logging.WARNING))
+    _plain_warnings()
     from tqdm.contrib.logging import logging_redirect_tqdm
 
     previous = _stop_on_sigterm()
@@ -934,6 +967,29 @@ def main(argv=None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _plain_warnings() -> None:
+    """mitpiv's own warnings (:class:`~mitpiv.errors.MitpivWarning`) print as one
+    ``mitpiv: warning: ...`` line, without Python's file and source-line decoration; the
+    warnings of other libraries keep Python's form. Only the formatting changes (installed
+    once per process): a caller that records warnings (``warnings.catch_warnings(record=True)``,
+    pytest) still records them."""
+    import warnings
+
+    from mitpiv.errors import MitpivWarning
+
+    default = warnings.formatwarning
+    if getattr(default, "mitpiv", False):
+        return
+
+    def plain(message, category, filename, lineno, line=None):
+        if issubclass(category, MitpivWarning):
+            return f"mitpiv: warning: {message}\n"
+        return default(message, category, filename, lineno, line)
+
+    plain.mitpiv = True
+    warnings.formatwarning = plain
 
 
 class _Terminated(BaseException):

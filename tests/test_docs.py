@@ -90,7 +90,7 @@ def test_readme_demo_numbers_are_the_measured_ones():
     text = README.read_text()
     head = text.index("| Q (frame 0 / 1) |")
     row = text[head:].splitlines()[2]
-    q0, q1, d0, d1, _vectors, _outliers, u, v, w = (float(x) for x in re.findall(r"\d+(?:\.\d+)?", row))
+    q0, q1, d0, d1, _g0, _g1, _vectors, _outliers, u, v, w = (float(x) for x in re.findall(r"\d+(?:\.\d+)?", row))
     sys.path.insert(0, str(ROOT / "bench"))
     import docblocks
 

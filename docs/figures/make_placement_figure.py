@@ -5,7 +5,7 @@ laser-sheet frame (``laser_direction`` e1 = x, ``sheet_normal`` e3 = z, e2 = e3 
 defaults), drawn from what :func:`mitpiv.physics.camera.place_camera` returns: the camera's
 position, its optical axis (towards the target) and the image's up vector and right.
 
-    python docs/figures/make_placement_figure.py [OUT.png]
+    .venv/bin/python docs/figures/make_placement_figure.py [OUT.png]
 """
 
 import sys

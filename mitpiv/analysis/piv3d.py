@@ -988,7 +988,8 @@ def velocity_error(field: VectorField, flow, *, dt_s: float | None = None, t0_s:
 
 
 def plot_velocity_error(field: VectorField, result: dict, path, *, axis: str = "z") -> None:
-    """PNG: error magnitude on the middle slice normal to ``axis`` and the error PDFs."""
+    """PNG: error magnitude on the middle slice normal to ``axis`` (mm axes) and the error
+    PDFs (in the field's unit; with cubic voxels a second axis in voxels per frame)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -999,18 +1000,40 @@ def plot_velocity_error(field: VectorField, result: dict, path, *, axis: str = "
     ax_i = {"z": 0, "y": 1, "x": 2}[axis]
     err = result["error"]
     mag = np.sqrt(np.sum(err * err, axis=-1))
-    sl = np.take(mag, mag.shape[ax_i] // 2, axis=ax_i)
-    fig, axs = plt.subplots(1, 2, figsize=(10, 4))
-    im = axs[0].imshow(sl, origin="lower", cmap="magma")
+    k = mag.shape[ax_i] // 2
+    sl = np.take(mag, k, axis=ax_i)
+    coords = {"x": field.x_mm, "y": field.y_mm, "z": field.z_mm}
+    h, v = {"z": ("x", "y"), "y": ("x", "z"), "x": ("y", "z")}[axis]
+
+    def extent(c):
+        c = np.asarray(c, dtype=float)
+        half = 0.5 * (c[1] - c[0]) if c.size > 1 else 0.5
+        return c[0] - half, c[-1] + half
+
+    fig, axs = plt.subplots(1, 2, figsize=(10.5, 4.2))
+    im = axs[0].imshow(sl, origin="lower", cmap="magma", interpolation="nearest",
+                       extent=(*extent(coords[h]), *extent(coords[v])))
+    axs[0].set_aspect("equal")
+    axs[0].set_xlabel(f"{h} [mm]")
+    axs[0].set_ylabel(f"{v} [mm]")
     fig.colorbar(im, ax=axs[0], label=f"|error| [{field.units}]")
-    axs[0].set_title(f"middle {axis} slice, window {field.window_vox}")
+    axs[0].set_title(f"{axis} = {float(coords[axis][k]):+.2f} mm (middle), windows "
+                     f"{'x'.join(str(w) for w in field.window_vox)} voxels", fontsize=10)
     e = err[np.isfinite(err[..., 0])]
+    vox = np.asarray(field.voxel_mm, dtype=float)
+    per = vox / field.dt_s if field.dt_s else vox  # one voxel (per frame) in the field's unit
+    unit_vox = "voxels/frame" if field.dt_s else "voxels"
     for c, name in enumerate("uvw"):
         if e.shape[0]:
-            axs[1].hist(e[:, c], bins=60, histtype="step", density=True, label=f"{name}: rms {result['rms'][c]:.3g}")
+            axs[1].hist(e[:, c], bins=60, histtype="step", density=True,
+                        label=f"{name}: RMS {result['rms'][c]:.3g} {field.units} = {result['rms'][c] / per[c]:.3g} "
+                              f"{unit_vox}")
     axs[1].set_xlabel(f"measured - reference [{field.units}]")
     axs[1].set_ylabel("PDF")
-    axs[1].legend(fontsize=8)
+    if np.allclose(per, per[0]):
+        top = axs[1].secondary_xaxis("top", functions=(lambda x: x / per[0], lambda x: x * per[0]))
+        top.set_xlabel(f"[{unit_vox}]", fontsize=9)
+    axs[1].legend(fontsize=8, loc="upper left")
     axs[1].set_title(f"outlier ratio {100 * result['outlier_ratio']:.2f} %, n = {result['n']}")
     fig.tight_layout()
     save_figure(fig, path, dpi=110)

@@ -36,14 +36,29 @@ def volume_quality(volume, truth_volume) -> dict:
 
 
 def evaluate_volume(volume, grid, truth_mm, *, method: str = "gauss3", threshold_rel: float = 0.1,
-                    radius_voxels: float = 2.0) -> tuple[dict, MatchResult]:
+                    radius_voxels: float = 2.0, threshold_of: str = "robust") -> tuple[dict, MatchResult]:
     """:func:`volume_quality` against the truth blobs (:func:`~mitpiv.analysis.truth_volume`
     of ``truth_mm`` on ``grid``), and the particles found and matched:
-    ({"Q", "Q*", "Q'", "Q'_spearman", "SNR", "particles": MatchResult.summary()}, MatchResult)."""
+    ({"Q", "Q*", "Q'", "Q'_spearman", "SNR", "particles": {...}}, MatchResult).
+
+    ``"particles"`` is ``MatchResult.summary()`` plus the detection threshold that was
+    used: ``threshold`` (absolute intensity), ``threshold_of`` and ``threshold_reference``
+    (the intensity ``threshold_rel`` multiplied). ``threshold_of`` defaults to ``"robust"``
+    (:func:`~mitpiv.analysis.find_particles`: a fraction of the 99.99th percentile of the
+    local maxima, at least the 50th brightest, not of the single brightest voxel, so two
+    frames of one run detect alike); ``"max"`` is the library's older rule."""
     tv = truth_volume(truth_mm, grid)
-    found = find_particles(volume, grid, method=method, threshold_rel=threshold_rel)
+    found = find_particles(volume, grid, method=method, threshold_rel=threshold_rel, threshold_of=threshold_of)
     res = match(found, truth_mm, grid=grid, radius_voxels=radius_voxels)
-    return {**volume_quality(volume, tv), "particles": res.summary()}, res
+    return {**volume_quality(volume, tv), "particles": {**res.summary(), **threshold_summary(found)}}, res
+
+
+def threshold_summary(found) -> dict:
+    """The detection threshold of :func:`~mitpiv.analysis.find_particles`' result ``found``:
+    ``{"threshold", "threshold_of", "threshold_reference"}`` (floats and a string)."""
+    ref = getattr(found, "reference", None)
+    return {"threshold": float(found.threshold), "threshold_of": getattr(found, "threshold_of", "max"),
+            "threshold_reference": None if ref is None else float(ref)}
 
 
 def velocity_error_summary(result: dict) -> dict:

@@ -40,6 +40,8 @@ __all__ = [
     "Camera",
     "CV_TO_MITSUBA",
     "on_sensor",
+    "box_coverage",
+    "box_corners",
     "PinholeCamera",
     "look_at_rotation",
     "place_camera",
@@ -47,6 +49,12 @@ __all__ = [
     "planar_array",
     "scatter_arrangement",
     "scheimpflug",
+    "COC_PX",
+    "thin_lens_depth_of_field",
+    "focal_depth",
+    "defocus_ratio",
+    "sensor_corner_rays",
+    "camera_to_world",
 ]
 
 #: OpenCV camera frame -> Mitsuba camera frame (x and y flip): a Mitsuba camera-to-world
@@ -111,6 +119,91 @@ def on_sensor(uv_px, resolution) -> np.ndarray:
     uv = np.asarray(uv_px, dtype=float)
     w, h = resolution
     return (uv[..., 0] >= 0) & (uv[..., 0] < w) & (uv[..., 1] >= 0) & (uv[..., 1] < h)
+
+
+#: Cells per axis of :func:`box_coverage` (16 x 16 x 16 = 4096 cell centres).
+COVERAGE_SAMPLES = 16
+
+
+def box_coverage(cameras, box_min_mm, box_max_mm, *, samples: int = COVERAGE_SAMPLES) -> dict:
+    """How much of an axis-aligned box each camera sees, and how much every camera sees.
+
+    The box is cut into ``samples`` cells per axis; a cell counts for a camera where
+    ``camera.visible`` holds at its centre (in front of it, projected onto its sensor), so
+    the fractions are volume fractions to about one layer of cells. Where every camera sees
+    a part but no centre is seen by all (a box much larger than the views), the common
+    fraction is sampled again, on as many cells, inside the box that the parts can share.
+    The eight corners are projected too, for the message of a box that a camera cuts.
+    Deterministic: the same box and cameras give the same numbers.
+
+    Parameters
+    ----------
+    cameras : mapping of name to Camera
+        Any cameras of the camera contract (:class:`Camera`).
+    box_min_mm, box_max_mm : (3,) float
+        Opposite corners of the box [mm, world].
+    samples : int
+        Cells per axis (>= 1).
+
+    Returns
+    -------
+    dict
+        ``"cameras"``: ``{name: {"fraction": seen volume fraction, "corners_px": (8, 2)
+        pixel positions of the corners (NaN behind the camera), "corners_visible": (8,)
+        bool}}``; ``"common"``: the volume fraction every camera sees; ``"common_box_mm"``:
+        ``(lower, upper)`` of the cells every camera sees (their extent, None where there
+        is none), a box to shrink to; ``"corners_mm"``: (8, 3).
+    """
+    lo = np.asarray(box_min_mm, dtype=float)
+    hi = np.asarray(box_max_mm, dtype=float)
+    if lo.shape != (3,) or hi.shape != (3,) or not np.all(np.isfinite(lo) & np.isfinite(hi)) or np.any(hi < lo):
+        raise ConfigError(f"box_coverage: box_min_mm {lo.tolist()} and box_max_mm {hi.tolist()} must be 3 finite "
+                          f"values each with box_max_mm >= box_min_mm [mm].")
+    if isinstance(samples, bool) or int(samples) != samples or samples < 1:
+        raise ConfigError(f"box_coverage: 'samples' must be a positive integer, got {samples!r}.")
+    if not cameras:
+        raise ConfigError("box_coverage: no cameras given.")
+    n = int(samples)
+    corners = box_corners(lo, hi)
+    pts, cell = _cell_centres(lo, hi, n)
+    seen = {name: np.asarray(cam.visible(pts), bool) for name, cam in cameras.items()}
+    seen_all = np.logical_and.reduce(list(seen.values()))
+    common, box = float(seen_all.mean()), _extent(pts[seen_all], cell)
+    if not seen_all.any() and all(v.any() for v in seen.values()):
+        # every camera sees a part, no cell centre is seen by all: the parts may overlap
+        # between the centres (a box much larger than the views); sample again where they can
+        lo2 = np.max([pts[v].min(axis=0) - cell for v in seen.values()], axis=0).clip(lo, hi)
+        hi2 = np.min([pts[v].max(axis=0) + cell for v in seen.values()], axis=0).clip(lo, hi)
+        if np.all(hi2 > lo2):
+            pts2, cell2 = _cell_centres(lo2, hi2, n)
+            all2 = np.logical_and.reduce([np.asarray(cam.visible(pts2), bool) for cam in cameras.values()])
+            common = float(all2.mean() * np.prod(hi2 - lo2) / np.prod(np.where(hi > lo, hi - lo, 1.0)))
+            box = _extent(pts2[all2], cell2)
+    per = {}
+    for name, cam in cameras.items():
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            uv = np.asarray(cam.project(corners), float)
+            front = np.asarray(cam.in_front(corners), bool)
+        per[name] = {"fraction": float(seen[name].mean()), "corners_px": np.where(front[:, None], uv, np.nan),
+                     "corners_visible": np.asarray(cam.visible(corners), bool)}
+    return {"cameras": per, "common": common, "corners_mm": corners, "common_box_mm": box}
+
+
+def box_corners(box_min_mm, box_max_mm) -> np.ndarray:
+    """The 8 corners (8, 3) of an axis-aligned box, corner ``k`` taking axis ``i``'s upper
+    value where bit ``i`` of ``k`` is set (the order of :func:`box_coverage`'s corners)."""
+    lo, hi = np.asarray(box_min_mm, dtype=float), np.asarray(box_max_mm, dtype=float)
+    return np.array([[(lo, hi)[(k >> i) & 1][i] for i in range(3)] for k in range(8)])
+
+
+def _cell_centres(lo, hi, n: int):
+    cell = (hi - lo) / n
+    axes = [lo[i] + (np.arange(n) + 0.5) * cell[i] for i in range(3)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3), cell
+
+
+def _extent(points, cell):
+    return (points.min(axis=0) - cell / 2, points.max(axis=0) + cell / 2) if len(points) else None
 
 
 @dataclass
@@ -569,3 +662,131 @@ def scheimpflug(rotation, position_mm, *, focal_length_mm: float, plane_point_mm
     beta = float(np.degrees(np.arctan(m * np.tan(np.radians(alpha)))))
     return {"focus_distance_mm": s, "focus_plane_normal": n.tolist(), "object_tilt_deg": alpha,
             "magnification": m, "sensor_tilt_deg": beta}
+
+
+# ---------------------------------------------------------------------- depth of field
+#: Circle of confusion of the focus checks: a point is in focus while its defocus blur spot
+#: stays within one pixel (one lenslet for a plenoptic camera).
+COC_PX = 1.0
+
+
+def thin_lens_depth_of_field(*, focal_length_mm: float, f_number: float, focus_distance_mm: float,
+                             blur_mm: float) -> tuple[float, float]:
+    """(near, far) distances [mm, along the optical axis from the lens] between which a point's
+    defocus blur spot on the sensor of a thin-lens ``distorted_pinhole`` stays within ``blur_mm``.
+
+    The renderer's thin lens (as Mitsuba's ``thinlens``) has its image plane at the focal
+    length ``f``: a point at depth ``z`` seen through the aperture point ``a`` lands
+    ``a (1/s - 1/z)`` (normalised coordinates) from its chief ray's image, ``s`` the focus
+    distance, so the blur spot's diameter on the sensor is ``c(z) = f D |1/z - 1/s|`` with the
+    aperture ``D = f / N``. ``c(z) <= c`` is ``|1/z - 1/s| <= N c / f^2``; with the hyperfocal
+    distance ``H = f^2 / (N c)``::
+
+        near = s H / (H + s),    far = s H / (H - s)   (infinite for s >= H)
+
+    (A physical thin lens with its sensor at the image distance ``s_i = f s / (s - f)`` blurs
+    ``s_i / f = 1 + M`` times more; the renderer's model is the one its images follow.)
+
+    Parameters
+    ----------
+    focal_length_mm, f_number, focus_distance_mm : float
+        ``f`` [mm], ``N``, ``s`` [mm].
+    blur_mm : float
+        Largest blur spot diameter ``c`` on the sensor [mm] (e.g. one pixel pitch).
+
+    Returns
+    -------
+    (float, float)
+        ``near``, ``far`` [mm]; ``far`` is ``inf`` at or beyond the hyperfocal distance.
+    """
+    f = check_positive("focal_length_mm", focal_length_mm, owner="thin_lens_depth_of_field", unit="mm")
+    n = check_positive("f_number", f_number, owner="thin_lens_depth_of_field")
+    s = check_positive("focus_distance_mm", focus_distance_mm, owner="thin_lens_depth_of_field", unit="mm")
+    c = check_positive("blur_mm", blur_mm, owner="thin_lens_depth_of_field", unit="mm")
+    h = f * f / (n * c)
+    return s * h / (h + s), (s * h / (h - s) if s < h else math.inf)
+
+
+def camera_to_world(camera) -> np.ndarray:
+    """A camera's 4x4 camera-to-world matrix in Mitsuba's convention (x left, y up, z along the
+    optical axis), of a :class:`PinholeCamera` or a plenoptic camera alike."""
+    m = camera.to_world_mitsuba
+    return np.asarray(m() if callable(m) else m, dtype=float)
+
+
+def focal_depth(camera, *, coc: float = COC_PX) -> dict | None:
+    """Where a camera images sharply: its focus distance ``s`` [mm], the tolerance ``kappa``
+    [1/mm] on inverse depth (a point at depth ``z`` along the axis is in focus while
+    ``|1/z - 1/s| <= kappa``) and the (near, far) limits on the axis ``1 / (1/s +- kappa)``.
+
+    * thin-lens :class:`PinholeCamera` (an ``f_number``): ``kappa = N c / f^2`` with ``c``
+      ``coc`` pixels (:func:`thin_lens_depth_of_field`);
+    * :class:`~mitpiv.physics.plenoptic.PlenopticCamera`: the range it refocuses over, where a
+      perspective view (one angular sample of the aperture, ``D / n_u``) blurs a point by at
+      most ``coc`` lenslets on the MLA (Deem et al. 2016;
+      :meth:`~mitpiv.physics.plenoptic.PlenopticCamera.depth_of_field` ``"perspective"``):
+      ``kappa = coc p n_u / (D s_i)``;
+    * an ideal pinhole: None (infinitely deep; its PSF, if any, is the same at every depth).
+    """
+    if hasattr(camera, "angular_samples"):  # plenoptic
+        s, nu = float(camera.focus_distance_mm), max(float(camera.angular_samples), 1.0)
+        kappa = coc * camera.mla_pitch_um * 1e-3 * nu / (camera.aperture_diameter_mm * camera.image_distance_mm)
+        what = (f"plenoptic refocusing range (f/{camera.f_number:.3g}, a perspective view blurs by at most "
+                f"{coc:g} lenslet)")
+    elif getattr(camera, "f_number", None) is not None and getattr(camera, "focus_distance_mm", None) is not None:
+        s = float(camera.focus_distance_mm)
+        kappa = camera.f_number * coc * camera.pixel_pitch_um * 1e-3 / camera.focal_length_mm ** 2
+        what = f"depth of field (thin lens f/{camera.f_number:.3g}, blur of at most {coc:g} px)"
+    else:
+        return None
+    far = 1.0 / (1.0 / s - kappa) if kappa < 1.0 / s else math.inf
+    return {"focus_distance_mm": s, "kappa_per_mm": kappa, "near_mm": 1.0 / (1.0 / s + kappa), "far_mm": far,
+            "what": what}
+
+
+def defocus_ratio(camera, p_world_mm, *, focus_plane_normal=None, coc: float = COC_PX) -> np.ndarray:
+    """A point's defocus blur in units of the allowed blur (:func:`focal_depth`): ``<= 1`` in
+    focus; for a thin lens with ``coc = 1`` it is the blur spot's diameter in pixels.
+
+    ``|1/z - 1/z_f| / kappa`` with ``z`` the point's depth along the optical axis and ``z_f``
+    the depth at which its chief ray meets the plane of focus: ``s`` or, for a plane of focus
+    tilted to ``focus_plane_normal`` (camera-local Mitsuba frame, as the ``distorted_pinhole``
+    records it; Scheimpflug), ``n_z s / (n_x x/z + n_y y/z + n_z)`` (first order in the
+    aperture for the tilted plane). Zeros for a camera without a focus (a pinhole); ``inf``
+    behind the camera.
+
+    Parameters
+    ----------
+    camera : Camera
+    p_world_mm : (..., 3) float
+    focus_plane_normal : (3,) float, optional
+    coc : float
+        Allowed blur [px; lenslets for a plenoptic camera].
+
+    Returns
+    -------
+    ndarray (...)
+    """
+    p = np.asarray(p_world_mm, dtype=float)
+    fd = focal_depth(camera, coc=coc)
+    if fd is None:
+        return np.zeros(p.shape[:-1])
+    m = camera_to_world(camera)
+    q = (p - m[:3, 3]) @ m[:3, :3]  # camera-local Mitsuba frame (x left, y up, z forward)
+    z = q[..., 2]
+    s = fd["focus_distance_mm"]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if focus_plane_normal is None:
+            zf = np.full_like(z, s)
+        else:
+            nx, ny, nz = (float(v) for v in focus_plane_normal)
+            zf = nz * s / (nx * q[..., 0] / z + ny * q[..., 1] / z + nz)
+        r = np.abs(1.0 / z - 1.0 / zf) / fd["kappa_per_mm"]
+    return np.where(z > 0, r, np.inf)
+
+
+def sensor_corner_rays(camera) -> tuple[np.ndarray, np.ndarray]:
+    """The chief rays through the sensor's four corners ``(0, 0), (W, 0), (W, H), (0, H)``
+    (``pixel_to_ray``): origin (3,) and unit directions (4, 3) in world [mm]."""
+    w, h = camera.resolution
+    return camera.pixel_to_ray(np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]]))

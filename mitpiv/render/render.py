@@ -50,6 +50,8 @@ _log = logging.getLogger(__name__)
 __all__ = ["render_scene", "render_sensor", "sensor_model", "write_preview", "PIXEL_UNITS", "DETERMINISM",
            "filter_rounding_bound", "black_image_hints"]
 
+#: What a rendered pixel value is, as written to each image's metadata (``units.pixel_value``)
+#: unless the camera states its own (``camera.pixel_value``, as the plenoptic sensor does).
 PIXEL_UNITS = (
     "radiance [W sr^-1 mm^-2] averaged over the pixel footprint and the aperture "
     "(Mitsuba's convention); particle intensities in W/sr, irradiance in W/mm^2"
@@ -208,7 +210,7 @@ def _truth_info(xml_path: Path, params: dict) -> tuple[str | None, np.ndarray | 
 
 
 def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0, progress=None,
-                 sensors=None) -> list[Path]:
+                 sensors=None, search_dirs=()) -> list[Path]:
     """Render every sensor of a scene XML for each frame.
 
     Writes ``{sensor_id}_frame{frame:03d}.exr`` (float32, metadata in the header) and a
@@ -240,6 +242,11 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
     sensors : sequence of str, optional
         Ids of the sensors to render (default every sensor of the scene); an id the scene
         does not have is an error that lists the ids it has.
+    search_dirs : sequence of path
+        Further folders in which the scene's relative file names are looked up, after the
+        scene file's own folder (:func:`~mitpiv.render.scene.load_scene`): an experiment
+        renders a copy of its XML placed beside its particle files, and the files the XML
+        names (a calibration) are found beside the original.
 
     Returns
     -------
@@ -269,7 +276,7 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
     if not xml_path.is_file():
         raise ConfigError(f"render_scene: scene file {str(xml_path)!r} does not exist.")
     # Load every frame first: a missing frame fails before anything is written.
-    scenes = {f: load_scene(xml_path, frame=f, params=params) for f in frames}
+    scenes = {f: load_scene(xml_path, frame=f, params=params, search_dirs=search_dirs) for f in frames}
     sha = hashlib.sha256(xml_path.read_bytes()).hexdigest()
     truth, times = _truth_info(xml_path, params)
     written = []

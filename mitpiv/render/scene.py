@@ -26,8 +26,11 @@ from mitpiv.errors import ConfigError, FileFormatError, MitpivError
 from mitpiv.io.particles import read_particles_ply
 from mitpiv.render.variant import ensure_variant
 
-__all__ = ["load_scene", "load_dict", "bind_particle_shapes", "scene_defaults", "particle_files", "raise_plugin_error",
-           "check_sensor_ids"]
+__all__ = ["load_scene", "load_sensors", "load_rig", "load_dict", "bind_particle_shapes", "scene_defaults",
+           "particle_files", "raise_plugin_error", "check_sensor_ids"]
+
+#: Top-level scene elements :func:`load_sensors` leaves out (no sensor depends on them).
+_NOT_SENSOR = ("shape", "emitter", "integrator", "medium", "texture")
 
 _PARTICLE_SHAPES = ("ellipsoidsmesh", "ellipsoids")
 
@@ -92,7 +95,10 @@ def check_sensor_ids(scene, where: str = "scene") -> list[str]:
     """The ids of the scene's sensors (``sensor{i}`` for one without an id); raise
     :class:`ConfigError` when two sensors are one object or share an id, since each camera's
     images are named and seeded by its id."""
-    sensors = list(scene.sensors())
+    return _distinct_ids(list(scene.sensors()), where)
+
+
+def _distinct_ids(sensors: list, where: str) -> list[str]:
     ids = [s.id() or f"sensor{i}" for i, s in enumerate(sensors)]
     same = [i for i in range(len(sensors)) for j in range(i) if sensors[i] is sensors[j] or ids[i] == ids[j]]
     if same:
@@ -160,7 +166,7 @@ def _check_proxy(ply: dict, path) -> None:
                       MitpivWarning, stacklevel=3)
 
 
-def load_scene(xml_path, *, frame: int = 0, params: dict | None = None):
+def load_scene(xml_path, *, frame: int = 0, params: dict | None = None, search_dirs=()):
     """Load a scene XML for one frame and bind mitpiv's plugins.
 
     The first call selects the Mitsuba variant and registers mitpiv's plugins when no
@@ -174,6 +180,10 @@ def load_scene(xml_path, *, frame: int = 0, params: dict | None = None):
         Substituted for ``$frame``.
     params : dict, optional
         Further ``$name`` substitutions (values converted with ``str``).
+    search_dirs : sequence of path
+        Further folders in which relative file names of the scene (a sensor's
+        ``calibration``) are looked up, after the scene file's own folder (which Mitsuba
+        searches first).
 
     Returns
     -------
@@ -199,12 +209,98 @@ def load_scene(xml_path, *, frame: int = 0, params: dict | None = None):
                               f"renderer cannot load an empty particle set. Write at least one particle "
                               f"(write_particles_ply) or remove the particle shape from the scene.")
         _check_proxy(ply, pf)
+    resolver = mi.file_resolver()
+    extra = [str(Path(d).resolve()) for d in search_dirs]
+    for d in reversed(extra):  # Mitsuba's load_file puts the scene's own folder before these
+        resolver.prepend(d)
     try:
         scene = mi.load_file(str(xml_path), optimize=False, **values)  # no sensor merging (module docstring)
     except MitpivError:
         raise
     except Exception as e:  # Mitsuba wraps plugin errors in RuntimeError
         raise_plugin_error(e, f"scene {str(xml_path)!r} (frame {frame})")
+    finally:
+        for _ in extra:
+            del resolver[0]
     check_sensor_ids(scene, f"scene {str(xml_path)!r}")
     bind_particle_shapes(scene)
     return scene
+
+
+def load_sensors(xml_path, *, params: dict | None = None) -> dict:
+    """The sensors of a scene file, loaded without its shapes, emitters or integrator.
+
+    What a pre-flight check needs (where each camera looks, its sensor size) costs a
+    fraction of a full :func:`load_scene`: no particle file is read, no Mie table built.
+    The sensors are the same plugin objects a full load makes (same properties, same
+    ``$name`` substitutions), so ``describe()`` and the camera models agree with a render.
+
+    Parameters
+    ----------
+    xml_path : path
+        Scene file. A file that includes other files (``<include>``) is loaded whole
+        (:func:`load_scene` needs its particle files: this raises as it does when they are
+        missing).
+    params : dict, optional
+        ``$name`` substitutions, as for :func:`load_scene` (values converted with ``str``).
+
+    Returns
+    -------
+    dict
+        ``{sensor id: mitsuba.Sensor}`` in the file's order (``sensor<i>`` for a sensor
+        without an id).
+    """
+    return _load_stripped(xml_path, params, sheets=False)["sensors"]
+
+
+def load_rig(xml_path, *, params: dict | None = None) -> dict:
+    """The sensors and laser sheets of a scene file: :func:`load_sensors` that also keeps the
+    top-level ``laser_sheet`` emitters (the plugin's own objects, so their defaults are the
+    render's), for a picture of the rig or a check of the sheet against the cameras' focus.
+
+    Other top-level emitters (a backlight, an environment map) are left out with the shapes:
+    they may name textures and files that a rig does not need.
+
+    Returns
+    -------
+    dict
+        ``{"sensors": {sensor id: mitsuba.Sensor}, "sheets": {emitter id: LaserSheet}}``, in
+        the file's order (``sensor<i>`` / ``sheet<i>`` for one without an id).
+    """
+    return _load_stripped(xml_path, params, sheets=True)
+
+
+def _load_stripped(xml_path, params, *, sheets: bool) -> dict:
+    """Load a scene file's sensors (and with ``sheets`` its top-level laser sheets) alone."""
+    ensure_variant()
+    xml_path = Path(xml_path)
+    if not xml_path.is_file():
+        raise ConfigError(f"scene file {str(xml_path)!r} does not exist.")
+    root = _parse(xml_path)
+    values = {**scene_defaults(xml_path), **{k: str(v) for k, v in (params or {}).items()}}
+    if any(True for _ in root.iter("include")):
+        scene = load_scene(xml_path, params=params)
+    else:
+        for el in list(root):
+            keep = sheets and el.tag == "emitter" and el.get("type") == "laser_sheet"
+            if (el.tag in _NOT_SENSOR and not keep) or el.tag == "default":
+                root.remove(el)
+        text = ET.tostring(root, encoding="unicode")
+        used = set(re.findall(r"\$(\w+)", text))
+        resolver = mi.file_resolver()
+        resolver.prepend(str(xml_path.resolve().parent))  # relative paths resolve as for load_file
+        try:
+            scene = mi.load_string(text, optimize=False, **{k: v for k, v in values.items() if k in used})
+        except MitpivError:
+            raise
+        except Exception as e:  # Mitsuba wraps plugin errors in RuntimeError
+            raise_plugin_error(e, f"scene {str(xml_path)!r} (its {'rig' if sheets else 'sensors'})")
+        finally:
+            del resolver[0]
+    sensors = scene.sensors()
+    ids = _distinct_ids(list(sensors), f"scene {str(xml_path)!r}")
+    out = {"sensors": dict(zip(ids, sensors, strict=True))}
+    if sheets:
+        found = [e for e in scene.emitters() if hasattr(e, "irradiance_numpy")]  # laser_sheet plugins
+        out["sheets"] = {e.id() or f"sheet{i}": e for i, e in enumerate(found)}
+    return out

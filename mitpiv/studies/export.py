@@ -81,7 +81,10 @@ def found_positions(run: Path, exp: dict, frame: int, matches) -> np.ndarray:
 
     vol, grid, _ = read_volume(run / "reconstruct" / f"volume_{frame}.npz")
     p = exp.get("particles") or {}
-    found = find_particles(vol, grid, method=p.get("method", "gauss3"), threshold_rel=p.get("threshold_rel", 0.1))
+    # a run's experiment.json names its threshold_of ("robust" by default); one without the
+    # key predates it and detected with the volume maximum
+    found = find_particles(vol, grid, method=p.get("method", "gauss3"), threshold_rel=p.get("threshold_rel", 0.1),
+                           threshold_of=p.get("threshold_of", "max"))
     if len(found) != matches.n_found:
         raise FileFormatError(f"export: {len(found)} particles found again in frame {frame}, the run found "
                               f"{matches.n_found}; rerun the evaluate stage.")
@@ -211,7 +214,7 @@ def export_vtk(run_dir, out_dir=None, *, progress: Progress = None) -> list[Path
             pvd += [(f.name, t, 3, "piv"), (f_tr.name, t, 4, "tracks_true")]
         files.append(vt.write_collection(out / "run.pvd", sorted(pvd, key=lambda x: (x[1], x[2]))))
         b.update()
-    log.info("vtk export: %d files in %s (open run.pvd in ParaView)", len(files), out)
+    log.debug("vtk export: %d files in %s", len(files), out)  # the CLI prints the result line
     return files
 
 

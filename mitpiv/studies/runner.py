@@ -126,12 +126,27 @@ def load_experiment(path, overrides: Mapping | None = None) -> BaseModel:
 
 
 def check_experiment(path, overrides: Mapping | None = None) -> BaseModel:
-    """Validate an experiment without running it (``mitpiv run --check``): its tables, and
-    every stage's own check (:func:`preflight`) for a whole run."""
+    """Validate an experiment without running it (``mitpiv run --check``): its tables,
+    every stage's own check (:func:`preflight`) for a whole run, and the checks that need
+    the scene's cameras (each stage's ``scene_check``: the measurement volume in every
+    camera's view) or the laser sheet too (each stage's ``rig_check``: the sheet within each
+    camera's depth of field), with the scene's sensors and sheets loaded once
+    (:func:`~mitpiv.studies.shared.scene_rig`)."""
     from mitpiv.studies.kinds import get_kind
+    from mitpiv.studies.shared import scene_rig
 
     cfg = load_experiment(path, overrides)
-    preflight(cfg, get_kind(cfg.kind).stages(cfg))
+    stages = get_kind(cfg.kind).stages(cfg)
+    preflight(cfg, stages)
+    deep = [s for s in stages if s.scene_check is not None or s.rig_check is not None]
+    if deep:
+        rig = scene_rig(cfg)
+        for s in deep:  # the checks that may refuse first, then those that only warn
+            if s.scene_check is not None:
+                s.scene_check(cfg, rig.cameras)
+        for s in deep:
+            if s.rig_check is not None:
+                s.rig_check(cfg, rig)
     return cfg
 
 

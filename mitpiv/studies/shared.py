@@ -22,7 +22,6 @@ from __future__ import annotations
 import difflib
 import functools
 import re
-import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
@@ -37,6 +36,8 @@ from mitpiv.progress import Progress
 from mitpiv.studies.schema import Table, discriminated, model_from_signature
 
 __all__ = ["RENDER_PACKAGES", "Stage", "StageContext", "Kind", "SceneTable", "flow_union", "resolve_scene_xml", "check_scene_sensors",
+           "scene_cameras", "check_coverage", "SceneRig", "scene_rig", "load_scene_rig", "sheet_region", "sheet_focus",
+           "check_sheet_focus",
            "resolve_table_file", "scene_files", "count_for_density", "frame_files", "images", "frame_images",
            "volume", "read_tracks", "run_truth", "grid_of", "source_of", "bounds_of", "null_metrics", "flatten",
            "fmt_metric", "pareto_front"]
@@ -69,6 +70,16 @@ class Stage:
         any stage of a run that includes it starts (and at ``mitpiv run --check``); for
         checks that hold only when the stage runs (a PIV window against the grid of a run
         stopped after the reconstruction is no error).
+    scene_check : callable or None
+        ``scene_check(cfg, cameras)``: a check that needs the scene's cameras (``{sensor id:
+        camera model}``, :func:`scene_cameras`), run by ``mitpiv run --check``, which loads
+        the scene's sensors once for all stages (a run checks again from the rendered
+        images' metadata, in the stage itself).
+    rig_check : callable or None
+        ``rig_check(cfg, rig)``: as ``scene_check``, for a check that needs more of the scene
+        than the camera models (:class:`SceneRig`: a thin lens' tilted plane of focus, the
+        laser sheets), run by ``mitpiv run --check`` and ``mitpiv preview`` from the same
+        loading of the scene.
     """
 
     name: str
@@ -77,6 +88,8 @@ class Stage:
     files: Callable[[BaseModel], list] | None = None
     packages: tuple[str, ...] = ()
     check: Callable[[BaseModel], None] | None = None
+    scene_check: Callable[[BaseModel, dict], None] | None = None
+    rig_check: Callable[[BaseModel, SceneRig], None] | None = None
 
 
 @dataclass
@@ -214,7 +227,8 @@ def resolve_table_file(raw: dict, table: str, base_dir: Path, *, hint: str = "")
 
 def scene_files(cfg, *, frames: tuple[int, ...] = (0, 1)) -> list[Path]:
     """The files outside the run folder that reading the scene touches: the scene XML and
-    every file it names (``filename`` attributes and ``<string name="filename">`` values,
+    every file it names (``filename`` attributes, ``<string name="filename">`` and a
+    sensor's ``<string name="calibration">`` values,
     ``$name`` substituted from its defaults and ``[scene] params``, ``$frame`` with each of
     ``frames``, relative names resolved against its folder), except the particle files,
     which the run makes. Their content is part of the render stage's key. Parsed with the
@@ -235,7 +249,8 @@ def scene_files(cfg, *, frames: tuple[int, ...] = (0, 1)) -> list[Path]:
     for el in root.iter():
         if el.get("filename"):
             names.append(el.get("filename"))
-        elif el.tag == "string" and el.get("name") == "filename" and id(el) not in made and el.get("value"):
+        elif el.tag == "string" and el.get("name") in ("filename", "calibration") and id(el) not in made \
+                and el.get("value"):
             names.append(el.get("value"))
     for n in names:
         for frame in frames:
@@ -273,33 +288,280 @@ def check_scene_sensors(cfg) -> None:
                           f"[render] sensors out for all of them).")
 
 
-def count_for_density(cfg, out: Path, *, frames: tuple[int, ...] = (0, 1)) -> int:
+@dataclass(frozen=True)
+class SceneRig:
+    """A scene's geometry without its particles, what the checks that need the cameras or the
+    laser sheet (``Stage.scene_check``, ``Stage.rig_check``) and ``mitpiv preview`` read
+    (:func:`scene_rig`, :func:`load_scene_rig`).
+
+    Attributes
+    ----------
+    cameras : dict
+        ``{sensor id: camera model}`` of the sensors mitpiv models, in the scene's order.
+    focus_normals : dict
+        ``{sensor id: normal of a tilted plane of focus (camera-local Mitsuba frame) or None}``:
+        a thin lens' Scheimpflug plane, which the camera model does not carry.
+    sheets : dict
+        ``{emitter id: the laser_sheet's describe() dict}`` (origin_mm, normal, direction,
+        thickness_mm, width_mm, ...).
+    """
+
+    cameras: dict
+    focus_normals: dict
+    sheets: dict
+
+
+def load_scene_rig(xml, *, params: dict | None = None, sensors=None, where: str | None = None) -> SceneRig:
+    """The :class:`SceneRig` of a scene XML (its ``sensors``, default all), from its sensors
+    and laser sheets alone (:func:`mitpiv.render.scene.load_rig`: no particle file, no Mie
+    table). A sensor mitpiv does not model (Mitsuba's own ``perspective``) is left out."""
+    from mitpiv.errors import FileFormatError
+    from mitpiv.io import camera_from_metadata
+    from mitpiv.render.render import sensor_model
+    from mitpiv.render.scene import load_rig
+
+    loaded = load_rig(xml, params=params)
+    found = loaded["sensors"]
+    wanted = list(sensors or found)
+    missing = [name for name in wanted if name not in found]
+    if missing:
+        raise ConfigError(f"{where or 'sensors'}: {missing} not in the scene {str(xml)!r}; its sensors are "
+                          f"{list(found)}.")
+    cameras, normals = {}, {}
+    for name in wanted:
+        d = sensor_model(found[name])
+        try:
+            cameras[name] = camera_from_metadata({"camera": d})
+        except FileFormatError:
+            continue
+        normals[name] = d.get("focus_plane_normal_camera_mitsuba")
+    return SceneRig(cameras, normals, {k: e.describe() for k, e in loaded["sheets"].items()})
+
+
+def scene_rig(cfg) -> SceneRig:
+    """The :class:`SceneRig` of the sensors a run renders (``[render] sensors``, default all)."""
+    return load_scene_rig(cfg.scene.xml, params=cfg.scene.params, sensors=getattr(cfg.render, "sensors", None),
+                          where=f"experiment {cfg.name!r}: [render] sensors")
+
+
+def scene_cameras(cfg) -> dict:
+    """The camera models of the sensors a run renders (``[render] sensors``, default all),
+    ``{sensor id: camera}`` in the scene's order, from the scene's sensors alone
+    (:func:`scene_rig`: no particle file, no Mie table). A sensor mitpiv does not model
+    (Mitsuba's own ``perspective``) is left out."""
+    return scene_rig(cfg).cameras
+
+
+#: A camera that sees less than this fraction of a measurement volume is warned about.
+COVERAGE_WARN = 0.9
+
+
+def check_coverage(cameras: dict, lower_mm, upper_mm, *, what: str, fix: str) -> dict:
+    """Refuse a measurement volume that no point of is seen by every camera; warn
+    (:class:`~mitpiv.errors.MitpivWarning`) when a camera sees less than
+    :data:`COVERAGE_WARN` of it. The numbers come from
+    :func:`mitpiv.physics.camera.box_coverage` (16 x 16 x 16 cells and the corners);
+    the message names each short camera's fraction, its corners off the sensor (pixel
+    positions) and the box every camera sees. Returns the coverage (None without a
+    modelled camera)."""
+    import warnings
+
+    from mitpiv.errors import MitpivWarning
+    from mitpiv.physics.camera import box_coverage
+
+    if not cameras:
+        return None
+    cov = box_coverage(cameras, lower_mm, upper_mm)
+    short = {k: c for k, c in cov["cameras"].items() if c["fraction"] < COVERAGE_WARN}
+    if not short:
+        return cov
+
+    def corner(k, c):
+        uv = c["corners_px"][k]
+        at = "behind the camera" if not np.all(np.isfinite(uv)) else f"at pixel ({uv[0]:.0f}, {uv[1]:.0f})"
+        return f"({', '.join(f'{v:g}' for v in cov['corners_mm'][k])}) {at}"
+
+    lines = []
+    for name, c in short.items():
+        off = [corner(k, c) for k in range(8) if not c["corners_visible"][k]]
+        w, h = cameras[name].resolution
+        lines.append(f"camera {name!r} sees {100 * c['fraction']:.0f} % of it ({len(off)} of its 8 corners off its "
+                     f"{w}x{h} sensor, e.g. {'; '.join(off[:2])})" if off else
+                     f"camera {name!r} sees {100 * c['fraction']:.0f} % of it")
+    box = cov["common_box_mm"]
+    lo, hi = np.asarray(lower_mm, float), np.asarray(upper_mm, float)
+    where = "no point of it is seen by every camera" if box is None else \
+        f"{100 * cov['common']:.0f} % of it is seen by every camera"
+    if box is not None and np.any(box[1] - box[0] < 0.95 * (hi - lo)):  # a smaller box holds the common view
+        where += ", within about " + ", ".join(f"{a} {lo_:.3g}..{hi_:.3g}" for a, lo_, hi_ in
+                                               zip("xyz", box[0], box[1], strict=True)) + " mm"
+    msg = f"{what} = {[float(v) for v in lower_mm]}..{[float(v) for v in upper_mm]} mm: {'; '.join(lines)}; {where}."
+    if cov["common"] == 0.0:
+        raise ConfigError(f"{msg} Nothing in it can be measured: {fix}.")
+    warnings.warn(f"{msg} The rest holds no measurement; {fix} if that is not intended.", MitpivWarning, stacklevel=2)
+    return cov
+
+
+#: A camera that has less than this fraction of the sheet's mid-plane in focus is warned about.
+FOCUS_WARN = 0.9
+
+
+def sheet_region(rig: SceneRig, sheet: dict, lower_mm=None, upper_mm=None) -> np.ndarray:
+    """The part of a laser sheet's mid-plane that matters, a convex polygon (K, 3) [mm]: its
+    section with the box ``lower_mm..upper_mm`` (a measurement volume) or, without a box, with
+    the view every camera shares (the intersection of their fields of view on the plane; their
+    joint extent where they share none); cut to the sheet's ``width_mm`` where it has one.
+    (0, 3) where the plane misses the box."""
+    from mitpiv.physics.camera import sensor_corner_rays
+    from mitpiv.physics.sheet import clip_polygon, plane_basis, plane_box_section
+
+    o, n = np.asarray(sheet["origin_mm"], float), np.asarray(sheet["normal"], float)
+    if lower_mm is not None:
+        poly = plane_box_section(o, n, lower_mm, upper_mm)
+    else:
+        prints = []
+        for cam in rig.cameras.values():
+            pos, d = sensor_corner_rays(cam)
+            den = d @ n
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = ((o - pos) @ n) / den
+            if np.all(np.isfinite(t) & (t > 0)):
+                prints.append(pos + t[:, None] * d)
+        if not prints:
+            return np.zeros((0, 3))
+        poly = prints[0]
+        for fp in prints[1:]:  # the common view: cut by each footprint's edges
+            c = fp.mean(axis=0)
+            for k in range(len(fp)):
+                a, b = fp[k], fp[(k + 1) % len(fp)]
+                out = np.cross(b - a, n)
+                out = out if (c - a) @ out < 0 else -out
+                poly = clip_polygon(poly, a, out)
+        if len(poly) < 3:  # no shared view: the joint extent (convex hull in the plane)
+            from scipy.spatial import ConvexHull
+
+            pts = np.concatenate(prints)
+            u, v = plane_basis(n)
+            poly = pts[ConvexHull(np.stack([pts @ u, pts @ v], axis=-1)).vertices]
+    if sheet.get("width_mm") and len(poly):
+        w = np.cross(n, np.asarray(sheet["direction"], float))
+        w /= np.linalg.norm(w)
+        half = 0.5 * float(sheet["width_mm"])
+        poly = clip_polygon(clip_polygon(poly, o + half * w, w), o - half * w, -w)
+    return poly
+
+
+def sheet_focus(rig: SceneRig, lower_mm=None, upper_mm=None) -> dict:
+    """How much of each laser sheet's mid-plane each camera with a focus images sharply.
+
+    The mid-plane within the box (or the cameras' common view, :func:`sheet_region`) is
+    sampled on a 32 x 32 grid; for each camera the points it sees (``visible``) count as in
+    focus where their defocus blur is within one pixel (a plenoptic camera: within its
+    refocusing range), :func:`mitpiv.physics.camera.defocus_ratio` with the camera's tilted
+    plane of focus where it has one. An ideal pinhole is infinitely deep and left out.
+
+    Returns
+    -------
+    dict
+        ``{sheet id: {"region_mm": (K, 3), "cameras": {sensor id: {"in_focus": fraction,
+        "depth_mm": (min, max) depth of the seen points along the axis, "axis_meets_sheet_mm":
+        distance at which the optical axis meets the mid-plane (None: parallel or behind),
+        "focus": focal_depth(), "tilted": bool}}}}``.
+    """
+    from mitpiv.physics.camera import camera_to_world, defocus_ratio, focal_depth
+    from mitpiv.physics.sheet import polygon_points
+
+    out = {}
+    for sid, sheet in rig.sheets.items():
+        region = sheet_region(rig, sheet, lower_mm, upper_mm)
+        pts = polygon_points(region, 32)
+        res = {}
+        o, n = np.asarray(sheet["origin_mm"], float), np.asarray(sheet["normal"], float)
+        for name, cam in rig.cameras.items():
+            fd = focal_depth(cam)
+            if fd is None or not len(pts):
+                continue
+            seen = np.asarray(cam.visible(pts), bool)
+            if not seen.any():
+                continue
+            tilt = rig.focus_normals.get(name)
+            r = defocus_ratio(cam, pts[seen], focus_plane_normal=tilt)
+            m = camera_to_world(cam)
+            z = (pts[seen] - m[:3, 3]) @ m[:3, 2]
+            den = float(m[:3, 2] @ n)
+            t = float((o - m[:3, 3]) @ n) / den if abs(den) > 1e-9 else None
+            res[name] = {"in_focus": float(np.mean(r <= 1.0)), "depth_mm": (float(z.min()), float(z.max())),
+                         "axis_meets_sheet_mm": t if t is not None and t > 0 else None, "focus": fd,
+                         "tilted": tilt is not None}
+        out[sid] = {"region_mm": region, "cameras": res}
+    return out
+
+
+def check_sheet_focus(rig: SceneRig, lower_mm=None, upper_mm=None, *, what: str) -> dict:
+    """Warn (:class:`~mitpiv.errors.MitpivWarning`) when a camera has less than
+    :data:`FOCUS_WARN` of a laser sheet's mid-plane within the volume in focus
+    (:func:`sheet_focus`), or when the mid-plane misses the volume; the message names each
+    camera's in-focus share, the depths of the mid-plane along its axis, its depth of field
+    and the focus distance that would put the sheet in focus. Returns :func:`sheet_focus`."""
+    import warnings
+
+    from mitpiv.errors import MitpivWarning
+
+    res = sheet_focus(rig, lower_mm, upper_mm)
+    box = "" if lower_mm is None else \
+        f" within {[float(v) for v in lower_mm]}..{[float(v) for v in upper_mm]} mm"
+    for sid, r in res.items():
+        sheet = rig.sheets[sid]
+        plane = (f"laser sheet {sid!r} (mid-plane through {[round(float(v), 4) for v in sheet['origin_mm']]} mm, "
+                 f"normal {[round(float(v), 4) for v in sheet['normal']]})")
+        if not len(r["region_mm"]):  # the mid-plane misses the volume: does the slab miss it too?
+            if lower_mm is not None:
+                from mitpiv.physics.camera import box_corners
+
+                d = (box_corners(lower_mm, upper_mm) - np.asarray(sheet["origin_mm"], float)) @ \
+                    np.asarray(sheet["normal"], float)
+                half = 0.5 * float(sheet["thickness_mm"])
+                if d.min() > half or d.max() < -half:
+                    warnings.warn(f"{what}: the {plane} does not reach the volume{box}: its {2 * half:g} mm thick "
+                                  f"slab spans {-half:g}..{half:g} mm about the mid-plane along its normal, the volume "
+                                  f"{d.min():.4g}..{d.max():.4g} mm; no particle in it is lit. Move the sheet's "
+                                  f"origin into the volume.", MitpivWarning, stacklevel=2)
+            continue
+        lines = []
+        for name, c in r["cameras"].items():
+            if c["in_focus"] >= FOCUS_WARN:
+                continue
+            fd = c["focus"]
+            far = "infinity" if not np.isfinite(fd["far_mm"]) else f"{fd['far_mm']:.4g}"
+            tilt = ", about its tilted plane of focus" if c["tilted"] else ""
+            hint = "" if c["axis_meets_sheet_mm"] is None else \
+                f" (its axis meets the mid-plane {c['axis_meets_sheet_mm']:.4g} mm away)"
+            lines.append(f"camera {name!r} has {100 * c['in_focus']:.0f} % of it in focus: the mid-plane lies "
+                         f"{c['depth_mm'][0]:.4g}..{c['depth_mm'][1]:.4g} mm from it along its axis{hint}, its "
+                         f"{fd['what']} {fd['near_mm']:.4g}..{far} mm (focus_distance_mm "
+                         f"{fd['focus_distance_mm']:.4g}{tilt})")
+        if lines:
+            warnings.warn(f"{what}: the {plane}{box}: {'; '.join(lines)}. Particles there image as blurred spots; "
+                          f"focus each camera on the sheet (focus_distance_mm where its axis meets the mid-plane), "
+                          f"tilt its plane of focus onto the sheet (focus_plane_normal = the sheet normal: "
+                          f"Scheimpflug) or stop it down (a larger f_number), if that is not intended.",
+                          MitpivWarning, stacklevel=2)
+    return res
+
+
+def count_for_density(cfg) -> int:
     """Particle count for the target per-pixel (or per-microlens) density of ``[seeding]``
     (``ppp``, and ``particles_per_microlens`` where the kind has it) in one sensor of the
-    scene (``[seeding] density_sensor``, default the first rendered one), the scene loaded
-    at frame 0 with one-particle placeholders for ``frames`` in a scratch folder under
-    ``out``."""
-    from mitpiv.io import camera_from_metadata, write_particles_ply
+    scene (``[seeding] density_sensor``, default the first rendered one), from the scene's
+    sensors alone (:func:`mitpiv.render.scene.load_sensors`: no particle file is needed)."""
+    from mitpiv.io import camera_from_metadata
     from mitpiv.physics.seeding import count_for_density as count
     from mitpiv.render.render import sensor_model
-    from mitpiv.render.scene import load_scene
+    from mitpiv.render.scene import load_sensors
     from mitpiv.streams import derived_seed
 
     s = cfg.seeding
-    # the scene reads particles_$frame.ply beside itself: a copy with one-particle placeholders
-    # in a scratch folder (removed: not an output of the stage)
-    scratch = out / ".density.tmp"
-    scratch.mkdir()
-    try:
-        xml = scratch / "scene.xml"
-        shutil.copy(cfg.scene.xml, xml)
-        centre = 0.5 * (np.asarray(s.box_min_mm, float) + np.asarray(s.box_max_mm, float))
-        for k in frames:
-            write_particles_ply(scratch / f"particles_{k}.ply", centre[None], 1.0, proxy_radius_mm=0.01)
-        sc = load_scene(xml, frame=0, params=cfg.scene.params)
-    finally:
-        shutil.rmtree(scratch, ignore_errors=True)
-    sensors = {(x.id() or f"sensor{i}"): x for i, x in enumerate(sc.sensors())}
+    sensors = load_sensors(cfg.scene.xml, params=cfg.scene.params)
     wanted = s.density_sensor or (cfg.render.sensors or [next(iter(sensors))])[0]
     if wanted not in sensors:
         raise ConfigError(f"experiment: [seeding] density_sensor = {wanted!r} is not in the scene; its sensors are "

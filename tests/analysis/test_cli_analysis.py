@@ -41,6 +41,13 @@ def test_evaluate_and_piv(tmp_path, capsys):
     assert m["particles"]["detection_rate"] > 0.6 and m["Q"] > 0.9
     assert (tmp_path / "m.png").stat().st_size > 10_000
     assert "detection" in capsys.readouterr().out
+    # the threshold's reference: robust by default, the brightest voxel on request (higher:
+    # a blob's peak can sit on the brightest of overlapping blobs)
+    assert m["particles"]["threshold_of"] == "robust"
+    assert main(["evaluate", str(b), "--truth", str(truth), "--frame", "1", "--threshold-of", "max", "--out",
+                 str(tmp_path / "mx.json")]) == 0
+    mx = json.loads((tmp_path / "mx.json").read_text())["particles"]
+    assert mx["threshold_of"] == "max" and mx["threshold_reference"] >= m["particles"]["threshold_reference"]
     out = tmp_path / "f.npz"
     assert main(["piv", str(a), str(b), "--out", str(out), "--windows", "32", "16", "--overlap", "0.5",
                  "--truth", str(truth)]) == 0

@@ -162,7 +162,9 @@ def test_volume_quality_is_the_evaluation_block():
     assert m == {"Q": quality_q(rec, t), "Q*": quality_q_zero_mean(rec, t), "Q'": rank_correlation(rec, t),
                  "Q'_spearman": rank_correlation(rec, t, centred=True), "SNR": plane_snr(rec)}
     ev, res = evaluate_volume(rec, GRID, p)
-    assert {k: ev[k] for k in m} == m and ev["particles"] == res.summary()
+    assert {k: ev[k] for k in m} == m and {k: ev["particles"][k] for k in res.summary()} == res.summary()
+    assert ev["particles"]["threshold_of"] == "robust"
+    assert ev["particles"]["threshold"] == pytest.approx(0.1 * ev["particles"]["threshold_reference"])
     with pytest.raises(ConfigError, match="volume_quality|shape"):
         volume_quality(rec, t[:-1])
 

@@ -1,5 +1,6 @@
-"""A tiny tomographic experiment (2 cameras, 48 px, 150 particles, MLOS on 0.4 mm voxels,
-one PIV pass: about a second of work after the first render) and the tools of the run
+"""A tiny tomographic experiment (2 cameras, 80 px, enough for the volume to lie in their
+view; 150 particles, MLOS on 0.4 mm voxels, one PIV pass: about a second of work after
+the first render) and the tools of the run
 integrity and fault tests: a child ``mitpiv run`` process that pauses inside a stage, and
 the comparison of two run folders."""
 
@@ -23,7 +24,7 @@ seed = 3
 
 [scene]
 xml = "{xml}"
-params = {{ resolution = 48, thickness_mm = 4, rays_per_particle = 4 }}
+params = {{ resolution = 80, thickness_mm = 4, rays_per_particle = 4 }}
 
 [seeding]
 box_min_mm = [-5.0, -5.0, -2.0]

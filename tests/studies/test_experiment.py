@@ -126,6 +126,21 @@ def test_cli_run(tmp_path, capsys):
     assert "valid tomo experiment" in capsys.readouterr().out
 
 
+def test_cli_run_help_says_out_is_required(tmp_path, capsys):
+    """`mitpiv run --help` marks the run folder as required (unless --check), and a run without
+    either is refused by the parser, before the experiment is read."""
+    from mitpiv.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["run", "--help"])
+    assert e.value.code == 0
+    out = " ".join(capsys.readouterr().out.split())  # whatever the terminal's width
+    assert "(--out DIR | --check)" in out and "required unless --check" in out
+    assert main(["run", str(tmp_path / "missing.toml")]) == 2
+    err = capsys.readouterr().err
+    assert "--out" in err and "--check" in err and "required" in err and "does not exist" not in err
+
+
 def test_sensor_stage(tmp_path):
     # 2000 photons at 10 e- per count: the brightest pixel at 200 of 255 counts, none clipped
     exp = write(tmp_path, BASE + "\n[sensor]\nbit_depth = 8\npeak_photons = 2000\nshot_noise = true\ngain_e_per_count = 10.0\n")

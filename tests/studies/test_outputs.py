@@ -3,6 +3,8 @@
 ``vtk`` package and compared with the run's own files, and the flow figures of the report."""
 
 import logging
+import os
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -163,6 +165,21 @@ def test_export_command_and_rerun(run, tmp_path, capsys, caplog):
     assert "vtk: done earlier, skipped" in caplog.text
 
 
+def test_export_command_says_its_result_once(run, tmp_path):
+    """`mitpiv export RUN --vtk` as a user runs it (a terminal shows stdout and stderr together):
+    the result line once, on stdout; the library's own message no longer repeats it on stderr."""
+    import subprocess
+    import sys
+
+    _, rd, _ = run
+    r = subprocess.run([sys.executable, "-m", "mitpiv.cli", "export", str(rd), "--vtk", "--out", str(tmp_path / "v")],
+                       capture_output=True, text=True, env={**os.environ, "MITPIV_QUIET": "1"})
+    assert r.returncode == 0, r.stderr
+    said = [line for line in (r.stdout + r.stderr).splitlines() if "run.pvd" in line or "VTK files" in line]
+    assert len(said) == 1 and said[0] in r.stdout, (r.stdout, r.stderr)
+    assert said[0].endswith(f" VTK files -> {tmp_path / 'v'} (open run.pvd in ParaView)"), said
+
+
 def test_export_refuses_unfinished_and_other_runs(run, tmp_path):
     import shutil
 
@@ -209,6 +226,96 @@ def test_report_shows_the_flow(run):
     for f in ("flow_slice.png", "velocity_profiles.png", "particles_3d.png"):
         assert f"({f})" in md, f
         assert (rd / "report" / f).stat().st_size > 20_000, f  # a drawn figure, not an empty canvas
+
+
+def _setup_rows(md: str) -> dict:
+    """The set-up table of a report: {quantity: value}."""
+    block = md[md.index("## Set-up"):md.index("## Reconstruction and particles")]
+    return dict(re.findall(r"^\| ([^|]+?) \| ([^|]+?) \|$", block, re.M))
+
+
+def _row(md: str, start: str) -> list[str]:
+    """The cells after ``start`` of the report's table row that begins with it."""
+    line = next(x for x in md.splitlines() if x.startswith(start))
+    return [c.strip() for c in line[len(start):].strip().strip("|").split("|")]
+
+
+def test_report_stands_alone(run, tmp_path, caplog):
+    """The report states the set-up (from the experiment, the truth file and the images'
+    metadata), every error in voxels and in physical units, each frame's detection
+    threshold, and the plane of flow_slice.png with why; [report] picks another plane and
+    reruns only the report."""
+    import shutil
+
+    from mitpiv.analysis import VectorField
+    from mitpiv.io import camera_from_metadata, read_exr_metadata, read_truth
+
+    _, rd, res = run
+    md = (rd / "report" / "report.md").read_text()
+    rows = _setup_rows(md)
+    truth = read_truth(rd / "particles" / "truth.npz")
+    p0 = truth["positions_mm"][0]
+    inside = int(np.all((p0 >= (-4, -4, -1.6)) & (p0 <= (4, 4, 1.6)), axis=1).sum())
+    assert rows["volume (reconstructed)"] == "x -4 .. 4, y -4 .. 4, z -1.6 .. 1.6 mm"
+    assert rows["voxel size"] == "0.1 mm" and rows["grid"] == "80 x 80 x 32 voxels (x, y, z)"
+    assert rows["time between the frames dt"] == "2 ms"
+    assert rows["particles"].startswith(f"400 seeded, {inside} inside the volume; diameter 1 um monodisperse")
+    assert rows["flow"] == "lamb_oseen: circulation_mm2_s = 1000, core_radius_mm = 1.5, center = [0, 0, 0], " \
+                           "axis = [0, 0, 1]"
+    assert rows["reconstruction"] == "mart, 3 iterations, relaxation 1"
+    assert rows["PIV"].startswith("windows 32 -> 16 voxels (last 1.6 x 1.6 x 1.6 mm), overlap 50 %, deformed windows")
+    assert "threshold_of = 'robust'" in rows["particle detection"] and "0.1 x the robust peak level" in \
+        rows["particle detection"]
+    # cameras: the images' own metadata; ppp = the frame-0 particles each images per pixel
+    metas = [read_exr_metadata(f) for f in sorted((rd / "render").glob("*_frame000.exr"))]
+    assert len(metas) == 4 and rows["images"].startswith("4 cameras, rendered")
+    pixels = []
+    for meta in metas:
+        cells = _row(md, f"| {meta['sensor_id']} |")
+        cam = camera_from_metadata(meta)
+        ppp = cam.visible(p0).sum() / (128 * 128)
+        assert cells[0] == meta["camera"]["type"] and cells[1] == "128 x 128", cells
+        assert float(cells[-1]) == pytest.approx(ppp, abs=6e-5), (cells, ppp)
+        sv = np.linalg.svd(cam.jacobian(np.zeros((1, 3)))[0], compute_uv=False)
+        pixels.append(1 / np.sqrt(np.mean(sv ** 2)))
+    pix = float(np.mean(pixels))
+    assert rows["object-space pixel (cameras' mean, volume centre)"] == f"{pix:.4f} mm = {pix / 0.1:.2f} voxels"
+    # particle position errors in voxels, mm and object pixels; the threshold each frame used
+    ev = res.metrics["evaluate"]
+    for frame in (0, 1):
+        pr = ev[f"frame{frame}"]["particles"]
+        cells = _row(md, f"| {frame} | RMS |")
+        assert cells[0] == " / ".join(f"{v:.3f}" for v in pr["rms_vox"])
+        assert cells[1] == " / ".join(f"{v:.4f}" for v in pr["rms_mm"])
+        assert cells[2] == " / ".join(f"{v / pix:.3f}" for v in pr["rms_mm"])
+        np.testing.assert_allclose(pr["rms_mm"], 0.1 * np.asarray(pr["rms_vox"]), rtol=1e-12)
+        assert pr["threshold_of"] == "robust" and pr["threshold"] == pytest.approx(0.1 * pr["threshold_reference"])
+        assert _row(md, f"| {frame} | ")[-1] == f"{pr['threshold']:.3g} = 0.1 x {pr['threshold_reference']:.3g} (robust)"
+    # velocity errors in voxels per frame and mm/s: 1 voxel/frame = 0.1 mm / 2 ms = 50 mm/s
+    pv = res.metrics["piv"]
+    assert _row(md, "| RMS error [voxels/frame] |") == [f"{v:.4f}" for v in pv["rms_vox"]]
+    assert _row(md, "| RMS error [mm/s] |") == [f"{v:.3f}" for v in pv["rms"]]
+    np.testing.assert_allclose(pv["rms"], 50.0 * np.asarray(pv["rms_vox"]), rtol=1e-9)
+    assert "1 voxel/frame = 0.1 x 0.1 x 0.1 mm / dt = 50 mm/s." in md
+    # flow_slice.png: a vortex along z, so "auto" takes the z mid-plane, and says why
+    field = VectorField.load(rd / "piv" / "field.npz")
+    z = field.z_mm[field.z_mm.size // 2]
+    assert f"flow_slice.png: the plane z = {z:+.2f} mm ([report] slice_axis = 'auto': " in md
+    assert "the one with the largest mean |vorticity| normal to it" in md
+    # another plane: only the report reruns
+    other = tmp_path / "run"
+    shutil.copytree(rd, other, ignore=shutil.ignore_patterns("vtk"))
+    exp = other.parent / "exp.toml"
+    exp.write_text(EXPERIMENT)
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="mitpiv"):
+        run_experiment(exp, other, overrides={"report.slice_axis": "x", "report.slice_mm": 1.0, "output.vtk": False})
+    assert caplog.text.count("done earlier, skipped") == 5 and "report ..." in caplog.text
+    md = (other / "report" / "report.md").read_text()
+    x = field.x_mm[np.argmin(np.abs(field.x_mm - 1.0))]
+    assert f"flow_slice.png: the plane x = {x:+.2f} mm ([report] slice_axis = 'x', slice_mm = 1: the PIV plane " \
+           "nearest it)." in md
+    assert (other / "report" / "flow_slice.png").stat().st_size > 20_000
 
 
 def test_sweep_plot_has_error_bars_over_seeds(tmp_path, monkeypatch):

@@ -312,9 +312,21 @@ def _common_points_correlation(a: dict, b: dict) -> dict:
 
 def _arm_run(ctx, arm: str, overrides: dict, key: str, variant: str = ""):
     """The replica arm's resumable experiment run ``work/runs/experiment_<arm>[_<variant>]_<key>``
-    (a finished run is read back, nothing recomputed)."""
-    return ctx.run(f"experiment_{arm}_{variant + '_' if variant else ''}{key}", experiment_dir() / "experiment.toml",
-                   overrides)
+    (a finished run is read back, nothing recomputed). The quick scale stops after the PIV:
+    the replication reads the run's fields and metrics, not its report (a quarter of a quick
+    arm's time went into the report's figures); its metrics are then the kind's summary of the
+    stages that ran, as a whole run writes them."""
+    import dataclasses
+
+    from mitpiv.studies.kinds import get_kind
+    from mitpiv.studies.runner import load_experiment
+
+    cfg = load_experiment(experiment_dir() / "experiment.toml", overrides)
+    res = ctx.run(f"experiment_{arm}_{variant + '_' if variant else ''}{key}", cfg,
+                  until="piv" if ctx.quick else None)
+    if not res.metrics:
+        res = dataclasses.replace(res, metrics=get_kind(cfg.kind).summary(cfg, res.stages))
+    return res
 
 
 def variant_arms(arms: dict) -> dict[str, dict]:

@@ -17,7 +17,8 @@ default and range)::
     [sensor]           the sensor model (mitpiv.imaging.SensorModel); optional
     [reconstruction]   method, bounds_mm, voxel_mm, iterations, ...
     [piv]              windows, overlap, deform, interpolation, ...
-    [particles]        method, threshold_rel, radius_voxels
+    [particles]        method, threshold_rel, threshold_of, radius_voxels
+    [report]           slice_axis, slice_mm: the plane of flow_slice.png
     [output]           vtk = true: ParaView files in RUN/vtk (mitpiv.studies.export)
 
 Stages: ``particles`` (seeding, advection, PLY files, truth), ``render`` (EXR per camera
@@ -48,7 +49,9 @@ from mitpiv.studies.shared import (
     SceneTable,
     Stage,
     StageContext,
+    check_coverage,
     check_scene_sensors,
+    check_sheet_focus,
     count_for_density,
     flatten,
     flow_union,
@@ -241,8 +244,34 @@ class ParticlesTable(Table):
     """Particles found in the reconstructed volume and matched to the truth."""
 
     method: Literal["gauss3", "centroid", "lsq"] = Field("gauss3", description="sub-voxel localisation")
-    threshold_rel: Annotated[float, Field(gt=0, lt=1)] = Field(0.1, description="peaks above this fraction of the max")
+    threshold_rel: Annotated[float, Field(gt=0, lt=1)] = Field(
+        0.1, description="local maxima above this fraction of the reference that threshold_of names are particles")
+    threshold_of: Literal["robust", "max"] = Field(
+        "robust", description="the reference of threshold_rel: 'robust' = the 99.99th percentile of the heights of the "
+                              "volume's local maxima, at least the 50th brightest (two frames of equal quality detect "
+                              "alike; needs more than ~50 particles), 'max' = the single brightest voxel (the rule "
+                              "before this key: one bright voxel moves a frame's threshold)")
     radius_voxels: PosFloat = Field(2.0, description="matching search radius [voxels]")
+
+
+class ReportTable(Table):
+    """The run's report (mitpiv.studies.report.tomo_report)."""
+
+    slice_axis: Literal["auto", "x", "y", "z"] = Field(
+        "auto", description="normal of the plane flow_slice.png shows: x, y or z, or 'auto' = of the three mid-planes "
+                            "(through the middle of the PIV field) the one with the most in-plane motion of the true "
+                            "window-averaged flow: the largest mean vorticity normal to it (in-plane rotation), for a "
+                            "flow without vorticity the largest mean in-plane speed")
+    slice_mm: float | None = Field(
+        None, description="position of that plane along slice_axis [mm], within [reconstruction] bounds_mm (the PIV "
+                          "plane nearest it is drawn; default: the middle of the PIV field); needs slice_axis x, y or z")
+
+    @model_validator(mode="after")
+    def _position_needs_axis(self):
+        if self.slice_mm is not None and self.slice_axis == "auto":
+            raise ValueError(f"slice_mm = {self.slice_mm:g} with slice_axis = 'auto': 'auto' picks one of the three "
+                             "mid-planes itself; give slice_axis = 'x', 'y' or 'z' with slice_mm, or drop slice_mm")
+        return self
 
 
 class _Experiment(Table):
@@ -258,6 +287,37 @@ class _Experiment(Table):
                                 f"{shape[2]}x{shape[1]}x{shape[0]} grid",
                            fix="use a smaller overlap or larger windows", quiet=True)
         return self
+
+    @model_validator(mode="after")
+    def _report_slice(self):
+        r, b = self.report, self.reconstruction.bounds_mm
+        if r.slice_mm is not None:
+            a = "xyz".index(r.slice_axis)
+            lo, hi = b[2 * a], b[2 * a + 1]
+            if not lo <= r.slice_mm <= hi:
+                raise ValueError(f"[report] slice_mm = {r.slice_mm:g} mm lies outside the reconstructed volume along "
+                                 f"{r.slice_axis} ({lo:g} .. {hi:g} mm, [reconstruction] bounds_mm); give a position "
+                                 f"within it")
+        return self
+
+
+def check_volume_coverage(cfg, cameras: dict) -> None:
+    """The reconstruction stage's scene check: the ``[reconstruction] bounds_mm`` box in
+    every camera's view (:func:`~mitpiv.studies.shared.check_coverage`: refused where no
+    point of it is seen by every camera, a warning where a camera sees under 90 % of it)."""
+    b = cfg.reconstruction.bounds_mm
+    check_coverage(cameras, (b[0], b[2], b[4]), (b[1], b[3], b[5]),
+                   what=f"experiment {cfg.name!r}: [reconstruction] bounds_mm",
+                   fix="give bounds_mm within the cameras' common view (or aim the cameras at the volume)")
+
+
+def check_sheet_in_focus(cfg, rig) -> None:
+    """The render stage's rig check: the laser sheet's mid-plane within ``[reconstruction]
+    bounds_mm`` inside the depth of field of each camera that has a focus
+    (:func:`~mitpiv.studies.shared.check_sheet_focus`: a warning, never a refusal)."""
+    b = cfg.reconstruction.bounds_mm
+    check_sheet_focus(rig, (b[0], b[2], b[4]), (b[1], b[3], b[5]),
+                      what=f"experiment {cfg.name!r}: [reconstruction] bounds_mm")
 
 
 def check_piv_windows(cfg) -> None:
@@ -300,6 +360,7 @@ def schema():
         "reconstruction": (ReconstructionTable, Field(..., description="volume reconstruction")),
         "piv": (PivTable, Field(default_factory=PivTable, description="3D PIV")),
         "particles": (ParticlesTable, Field(default_factory=ParticlesTable, description="particle evaluation")),
+        "report": (ReportTable, Field(default_factory=ReportTable, description="the run's report (figures)")),
         "output": (OutputTable, Field(default_factory=OutputTable, description="extra output files")),
     }
     model = create_model("TomoExperiment", __base__=_Experiment,
@@ -340,7 +401,7 @@ def stage_particles(ctx: StageContext) -> dict:
     else:
         kw = _seeding_kwargs(s)
         if s.ppp is not None or s.particles_per_microlens is not None:
-            kw["count"] = count_for_density(cfg, out)
+            kw["count"] = count_for_density(cfg)
         particles = seed_box(s.box_min_mm, s.box_max_mm, seed=cfg.seed, **kw)
         p0, diam = particles.positions_mm, particles.diameters_um
     f = cfg.flow.model_dump()
@@ -376,7 +437,8 @@ def stage_render(ctx: StageContext) -> dict:
                 shutil.copy(src, dst)
             links.append(dst)
         files = render_scene(xml, out_dir=ctx.out, frames=FRAMES, params=cfg.scene.params, spp=cfg.render.spp,
-                             seed=cfg.seed, progress=ctx.progress, sensors=cfg.render.sensors)
+                             seed=cfg.seed, progress=ctx.progress, sensors=cfg.render.sensors,
+                             search_dirs=[Path(cfg.scene.xml).parent])
     finally:
         for f in links:
             f.unlink(missing_ok=True)
@@ -435,7 +497,7 @@ def _undistorted(meta: dict) -> dict:
 
 def stage_reconstruct(ctx: StageContext) -> dict:
     from mitpiv import costs
-    from mitpiv.io import read_exr_metadata, write_volume
+    from mitpiv.io import camera_from_metadata, read_exr_metadata, write_volume
     from mitpiv.reconstruct.images import reconstruct_images, reconstruction_cost_of
     from mitpiv.reconstruct.tomo import WeightCache
 
@@ -443,12 +505,16 @@ def stage_reconstruct(ctx: StageContext) -> dict:
     r = cfg.reconstruction
     grid = grid_of(cfg)
     first = sorted((ctx.run_dir / source_of(cfg)).glob("*_frame000.exr"))
-    cost = reconstruction_cost_of([read_exr_metadata(f) for f in first], grid, r.method, iterations=r.iterations,
+    metas0 = [read_exr_metadata(f) for f in first]
+    cost = reconstruction_cost_of(metas0, grid, r.method, iterations=r.iterations,
                                   rays_per_pixel=r.rays_per_pixel)
     fix = "use larger voxels or smaller bounds" + (
         ", fewer rays_per_pixel or a smaller light-field sensor (a crop)" if r.method == "drt-mart" else "")
     costs.check_memory(cost, what=f"[reconstruction] {r.method} on {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]} "
                        "voxels, per frame", fix=fix)
+    # the volume in the cameras' view, from the rendered cameras (what --check did from the scene)
+    check_volume_coverage(cfg, {f.stem.rsplit("_frame", 1)[0]: camera_from_metadata(m)
+                                for f, m in zip(first, metas0, strict=True)})
     info = {}
     cache = WeightCache()  # the cameras do not move between frames: weights built once
     for frame in FRAMES:
@@ -481,7 +547,7 @@ def stage_evaluate(ctx: StageContext) -> dict:
         vol = volume(ctx.run_dir, frame)
         m, res = analysis.evaluate_volume(
             vol, grid, truth["positions_mm"][frame], method=p.method,
-            threshold_rel=p.threshold_rel, radius_voxels=p.radius_voxels)
+            threshold_rel=p.threshold_rel, radius_voxels=p.radius_voxels, threshold_of=p.threshold_of)
         reasons = {"particles": f"no reconstructed particle of frame {frame} matched a true one"}
         if not np.any(np.asarray(vol) > 0):
             # an empty volume correlates with nothing: its Q would read 0, not a measurement
@@ -543,13 +609,13 @@ def stages(cfg) -> list[Stage]:
     out = [Stage("particles", ("seed", "seeding", "flow") + (("scene",) if dens else ()), stage_particles,
                  files=scene_files if dens else None, packages=RENDER_PACKAGES if dens else ()),
            Stage("render", ("scene", "render"), stage_render, files=scene_files, packages=RENDER_PACKAGES,
-                 check=check_scene_sensors)]
+                 check=check_scene_sensors, rig_check=check_sheet_in_focus)]
     if cfg.sensor is not None:
         out.append(Stage("sensor", ("sensor",), stage_sensor))
-    out += [Stage("reconstruct", ("reconstruction",), stage_reconstruct),
+    out += [Stage("reconstruct", ("reconstruction",), stage_reconstruct, scene_check=check_volume_coverage),
             Stage("evaluate", ("particles",), stage_evaluate),
             Stage("piv", ("piv",), stage_piv, check=check_piv_windows),
-            Stage("report", (), stage_report)]
+            Stage("report", ("report",), stage_report)]
     if cfg.output.vtk:
         out.append(Stage("vtk", ("output",), stage_vtk))
     return out

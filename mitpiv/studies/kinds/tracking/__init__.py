@@ -73,7 +73,9 @@ from mitpiv.studies.shared import (
     Stage,
     StageContext,
     bounds_of,
+    check_coverage,
     check_scene_sensors,
+    check_sheet_focus,
     count_for_density,
     flow_union,
     frame_images,
@@ -293,13 +295,13 @@ def prepare(raw: dict, base_dir: Path) -> dict:
 
 
 # ------------------------------------------------------------------------------- helpers
-def _count(cfg, out: Path) -> int:
+def _count(cfg) -> int:
     s = cfg.seeding
     if s.count is not None:
         return int(s.count)
     if s.concentration_per_mm3 is not None:
         return int(round(s.concentration_per_mm3 * np.prod(np.subtract(s.box_max_mm, s.box_min_mm))))
-    return count_for_density(cfg, out, frames=(0,))  # the scene at frame 0
+    return count_for_density(cfg)
 
 
 def load_otf(run: Path):
@@ -322,7 +324,7 @@ def stage_field(ctx: StageContext) -> dict:
     dt = float(f.pop("dt_s"))
     flow = flow_from_dict(f)
     seq = advect_sequence(flow, box_min_mm=s.box_min_mm, box_max_mm=s.box_max_mm, n_frames=cfg.sequence.frames,
-                          dt_s=dt, count=_count(cfg, out), diameter_um=s.diameter_um, distribution=s.distribution,
+                          dt_s=dt, count=_count(cfg), diameter_um=s.diameter_um, distribution=s.distribution,
                           geometric_std=s.geometric_std, substeps=cfg.sequence.substeps, reseed=s.reseed,
                           seed=generator(cfg.seed, "tracking-field"), progress=ctx.progress)
     for k in range(cfg.sequence.frames):
@@ -337,11 +339,13 @@ def stage_field(ctx: StageContext) -> dict:
             "entered": int(seq.ids.size - present[0].sum())}
 
 
-def render_chunk(xml: str, frames: list[int], params: dict, spp, seed: int, sensors, out_dir: str) -> list[str]:
+def render_chunk(xml: str, frames: list[int], params: dict, spp, seed: int, sensors, out_dir: str,
+                 search_dirs=()) -> list[str]:
     """Render one chunk of frames (a module-level function: it runs in Dask workers too)."""
     from mitpiv.render.render import render_scene
 
-    files = render_scene(xml, out_dir=out_dir, frames=frames, params=params, spp=spp, seed=seed, sensors=sensors)
+    files = render_scene(xml, out_dir=out_dir, frames=frames, params=params, spp=spp, seed=seed, sensors=sensors,
+                         search_dirs=search_dirs)
     (Path(out_dir) / "render.json").unlink(missing_ok=True)  # one index per chunk: the stage writes its own
     return [f.name for f in files]
 
@@ -359,7 +363,8 @@ def stage_render(ctx: StageContext) -> dict:
     links = []
     r = cfg.render
     chunks = [list(range(i, min(i + r.chunk_frames, n))) for i in range(0, n, r.chunk_frames)]
-    args = (str(xml), dict(cfg.scene.params), r.spp, cfg.seed, r.sensors, str(ctx.out))
+    # the files the XML names (a calibration) are found beside the original
+    args = (str(xml), dict(cfg.scene.params), r.spp, cfg.seed, r.sensors, str(ctx.out), [str(Path(cfg.scene.xml).parent)])
     names: list[str] = []
     try:
         for k in range(n):
@@ -539,11 +544,32 @@ def track_images(sequence, cameras, otf, *, dt_s: float, lower_mm, upper_mm, tra
     return Tracks(pos, inten, float(dt_s), history=[{"frame": f, "particles": len(r)} for f, r in enumerate(res)])
 
 
+def check_track_coverage(cfg, cameras: dict) -> None:
+    """The track stage's scene check: the measurement box (``[tracking] bounds_mm`` or the
+    seeding box) in every camera's view (:func:`~mitpiv.studies.shared.check_coverage`)."""
+    lo, hi = bounds_of(cfg)
+    what = "[tracking] bounds_mm" if cfg.tracking.bounds_mm is not None else "[seeding] box_min_mm..box_max_mm"
+    check_coverage(cameras, lo, hi, what=f"experiment {cfg.name!r}: {what}",
+                   fix="give a box within the cameras' common view (or aim the cameras at it)")
+
+
+def check_sheet_in_focus(cfg, rig) -> None:
+    """The render stage's rig check: the laser sheet's mid-plane within the measurement box
+    inside the depth of field of each camera that has a focus
+    (:func:`~mitpiv.studies.shared.check_sheet_focus`: a warning, never a refusal)."""
+    lo, hi = bounds_of(cfg)
+    what = "[tracking] bounds_mm" if cfg.tracking.bounds_mm is not None else "[seeding] box_min_mm..box_max_mm"
+    check_sheet_focus(rig, lo, hi, what=f"experiment {cfg.name!r}: {what}")
+
+
 def stage_track(ctx: StageContext) -> dict:
     cfg = ctx.cfg
     cams = load_cameras(ctx.run_dir)
     otf = load_otf(ctx.run_dir)
     lo, hi = bounds_of(cfg)
+    ids = (ctx.results.get("calibrate") or {}).get("cameras") or [f"camera{i}" for i in range(len(cams))]
+    check_coverage(dict(zip(ids, cams, strict=True)), lo, hi, what=f"experiment {cfg.name!r}: the measurement box",
+                   fix="give a box within the cameras' common view (or aim the cameras at it)")
     seq = [frame_images(ctx.run_dir, f)[0] for f in range(cfg.sequence.frames)]
     fit = [e for e in (ctx.results.get("calibrate") or {}).get("fit_rms_px") or [] if e is not None]
     tr = track_images(seq, cams, otf, dt_s=cfg.flow.dt_s, lower_mm=lo, upper_mm=hi, tracking=cfg.tracking,
@@ -608,10 +634,10 @@ def stages(cfg) -> list[Stage]:
     out = [Stage("field", ("seed", "seeding", "flow", "sequence") + (("scene", "render") if dens else ()), stage_field,
                  files=scene_files if dens else None, packages=RENDER_PACKAGES if dens else ()),
            Stage("render", ("scene", "render"), stage_render, files=scene_files, packages=RENDER_PACKAGES,
-                 check=check_scene_sensors),
+                 check=check_scene_sensors, rig_check=check_sheet_in_focus),
            Stage("calibrate", ("calibration",), stage_calibrate),
            Stage("otf", ("otf", "tracking"), stage_otf),
-           Stage("track", ("tracking", "flow"), stage_track),
+           Stage("track", ("tracking", "flow"), stage_track, scene_check=check_track_coverage),
            Stage("evaluate", ("evaluate",), stage_evaluate),
            *compare_stages(cfg),
            Stage("report", (), stage_report)]
