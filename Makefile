@@ -27,6 +27,7 @@ bench: setup
 	$(PY) bench/bench_demo.py
 	$(PY) bench/bench_cameras.py
 	$(PY) bench/bench_mie.py
+	$(PY) bench/bench_jet.py
 	$(PY) bench/bench_optics.py
 	$(PY) bench/bench_lightfield.py
 	$(PY) bench/bench_reconstruct.py
