@@ -20,6 +20,7 @@ OUTPUTS = {
                            "run/vtk/piv.vts"],
     "distortion_and_q.py": ["distortion_and_q.png"],
     "sweep.py": ["results.csv", "sweep.png"],
+    "preview_rig.py": ["tomo4/rig.png", "tomo4/views.png", "tomo4/rig.vtu", "misaimed/rig.png", "misaimed/views.png"],
 }
 
 
@@ -40,6 +41,8 @@ def test_example_runs_small(script, tmp_path, monkeypatch, capsys):
         q = {line.split("model ")[1].split(":")[0].strip(): float(line.rsplit("=", 1)[1])
              for line in text.splitlines() if line.startswith("distortion 5")}
         assert q["undistorted"] < q["true"] - 0.02
+    if script == "preview_rig.py":  # the committed rig is seen whole, the misaimed camera warned about
+        assert "cam0: sees 100 %" in text and "camera 'cam0' sees 7" in text
     if script == "sweep.py":
         import pandas as pd
 

@@ -1,6 +1,6 @@
 """ParaView / VTK files: volumes as image data (``.vti``), vector fields on a lattice as
 structured grids (``.vts``), particles as point clouds (``.vtu`` vertices), tracks as
-polylines (``.vtu``) and a collection (``.pvd``) that groups them by time; all VTK XML,
+polylines (``.vtu``), lines and polygons (``.vtu``: a rig's wireframes) and a collection (``.pvd``) that groups them by time; all VTK XML,
 binary (raw appended), written atomically.
 
 The writer is pyevtk (a kept library; nothing here formats VTK by hand): this module only
@@ -27,13 +27,14 @@ import numpy as np
 from mitpiv.errors import ConfigError
 from mitpiv.io.atomic import atomic_path
 
-__all__ = ["write_image_data", "write_structured_grid", "write_points", "write_tracks", "write_collection",
-           "VTK_SUFFIXES"]
+__all__ = ["write_image_data", "write_structured_grid", "write_points", "write_tracks", "write_cells",
+           "write_collection", "VTK_SUFFIXES"]
 
 log = logging.getLogger(__name__)
 
 #: The file suffix of each writer's output.
-VTK_SUFFIXES = {"image": ".vti", "structured": ".vts", "points": ".vtu", "tracks": ".vtu", "collection": ".pvd"}
+VTK_SUFFIXES = {"image": ".vti", "structured": ".vts", "points": ".vtu", "tracks": ".vtu", "cells": ".vtu",
+                "collection": ".pvd"}
 
 _DTYPES = {np.dtype(t) for t in ("int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64",
                                  "float32", "float64")}
@@ -228,6 +229,46 @@ def write_tracks(path, positions_mm, track_id, arrays: Mapping[str, np.ndarray] 
     return _write(path, ".vtu", lambda stem: unstructuredGridToVTK(
         stem, *cols, connectivity=connectivity, offsets=offsets, cell_types=types, cellData=cell_data,
         pointData=point_data))
+
+
+def write_cells(path, points_mm, cells: Sequence[Sequence[int]], arrays: Mapping[str, np.ndarray] | None = None
+                ) -> Path:
+    """Write line and polygon geometry (wireframes, outlines, faces) as a VTK unstructured
+    grid (``.vtu``): a cell of two point indices is a line, of more a polygon.
+
+    Parameters
+    ----------
+    path : str or Path
+        Target file, ``.vtu``.
+    points_mm : (N, 3) array
+        Vertices x, y, z [mm].
+    cells : sequence of sequences of int
+        Each cell's vertex indices (2: a line; 3 or more: a polygon, in order round it).
+    arrays : mapping of name -> (C,) or (C, 3) array, optional
+        Per-cell values (e.g. an integer ``part`` to colour by).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    path = _check_path(path, ".vtu", "write_cells")
+    from pyevtk.hl import unstructuredGridToVTK
+    from pyevtk.vtk import VtkLine, VtkPolygon
+
+    p = _positions(points_mm, "write_cells", "points_mm")
+    cells = [np.asarray(c, dtype=np.int64).ravel() for c in cells]
+    bad = [k for k, c in enumerate(cells) if c.size < 2 or c.min() < 0 or c.max() >= p.shape[0]]
+    if bad:
+        raise ConfigError(f"write_cells: cell {bad[0]} ({cells[bad[0]].tolist()}) must hold 2 or more indices of the "
+                          f"{p.shape[0]} points.")
+    cell_data = _layout(arrays, (len(cells),), "write_cells", to_vtk=lambda a: a)
+    connectivity = np.concatenate(cells).astype(np.int32) if cells else np.zeros(0, np.int32)
+    offsets = np.cumsum([c.size for c in cells]).astype(np.int32)
+    types = np.array([VtkLine.tid if c.size == 2 else VtkPolygon.tid for c in cells], dtype=np.uint8)
+    cols = tuple(np.ascontiguousarray(p[:, c]) for c in range(3))
+    return _write(path, ".vtu", lambda stem: unstructuredGridToVTK(
+        stem, *cols, connectivity=connectivity, offsets=offsets, cell_types=types, cellData=cell_data or None))
 
 
 def write_collection(path, entries: Sequence[tuple]) -> Path:

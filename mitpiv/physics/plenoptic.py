@@ -695,6 +695,20 @@ class PlenopticCamera:
         w, h = self.resolution
         return t * self.chief_ray_scale_px + np.array([w / 2.0, h / 2.0])
 
+    def pixel_to_ray(self, uv_px, *, iterations: int = 20):
+        """Chief rays through the main-lens centre of image points, the inverse of
+        :meth:`project`: (origin (3,), unit directions (..., 3)) in world."""
+        uv = np.asarray(uv_px, dtype=float)
+        w, h = self.resolution
+        t = (uv - np.array([w / 2.0, h / 2.0])) / self.chief_ray_scale_px
+        if not self.distortion.is_zero:
+            tx, ty = undistort(t[..., 0], t[..., 1], self.distortion, iterations=iterations)
+            t = np.stack([tx, ty], axis=-1)
+        d = np.concatenate([-t, np.ones(t.shape[:-1] + (1,))], axis=-1)  # project: t = -(x, y) / z
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        m = self.to_world_mitsuba
+        return m[:3, 3].copy(), d @ m[:3, :3].T
+
     def in_front(self, p_world_mm) -> np.ndarray:
         """Points (..., 3) [mm] in front of the main lens (local z > 0), shape (...)."""
         return self.world_to_local(p_world_mm)[..., 2] > 0
