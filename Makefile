@@ -12,8 +12,10 @@ setup:
 demo: setup
 	$(PY) -m mitpiv.cli run scenes/tomo4/experiment.toml --out $(OUT)
 
+# two test processes (pytest-xdist; whole files to a process, so a module's fixtures are built
+# once): 12.7 min against 17.6 min one at a time on 2 cores (2026-11-28)
 test: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist loadfile
 
 docs: setup
 	$(PY) -m sphinx -W --keep-going -E -q -b html docs docs/_build/html
