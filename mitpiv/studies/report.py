@@ -548,7 +548,9 @@ def _cameras(metas, p0, centre) -> list[dict]:
     to z, its azimuth and distance from the volume centre, its object-space pixel at the
     centre [mm] and the particles it images per pixel (``p0``: the frame's particles);
     None where the metadata does not say."""
+    from mitpiv.errors import FileFormatError
     from mitpiv.io import camera_from_metadata
+    from mitpiv.photometry import photometric_f_number
 
     out = []
     for meta in metas:
@@ -556,12 +558,10 @@ def _cameras(metas, p0, centre) -> list[dict]:
         res = cam.get("resolution")
         d = {"id": meta.get("sensor_id") or "?", "type": cam.get("type"), "resolution": res,
              "focal_length_mm": cam.get("focal_length_mm"), "pixel_pitch_um": cam.get("pixel_pitch_um"),
-             "f_number": cam.get("f_number"), "f_from": "", "axis_to_z": None, "azimuth": None, "distance": None,
-             "pixel_mm": None, "ppp": None}
-        if d["f_number"] is None and cam.get("photometric_f_number") is not None:
-            d["f_number"], d["f_from"] = cam["photometric_f_number"], " (photometric)"
-        if d["f_number"] is None and (cam.get("psf") or {}).get("f_number") is not None:
-            d["f_number"], d["f_from"] = cam["psf"]["f_number"], " (diffraction PSF)"
+             "f_number": photometric_f_number(cam), "f_from": "", "axis_to_z": None, "azimuth": None,
+             "distance": None, "pixel_mm": None, "ppp": None}
+        if cam.get("f_number") is None and d["f_number"] is not None:  # where photometric_f_number found it
+            d["f_from"] = " (photometric)" if cam.get("photometric_f_number") is not None else " (diffraction PSF)"
         axis = pos = None
         if cam.get("R") is not None and cam.get("position_mm") is not None:
             axis, pos = np.asarray(cam["R"], float)[2], cam["position_mm"]  # the optical axis (camera +z)
@@ -583,7 +583,7 @@ def _cameras(metas, p0, centre) -> list[dict]:
             else:
                 s = np.linalg.svd(np.asarray(c.jacobian(np.asarray(centre, float).reshape(1, 3)))[0], compute_uv=False)
                 d["pixel_mm"] = float(1.0 / np.sqrt(np.mean(np.square(s))))
-        except Exception:  # noqa: BLE001 - a camera kind without visible / jacobian: n/a
+        except FileFormatError:  # a sensor mitpiv does not model (Mitsuba's own): n/a
             pass
         out.append(d)
     return out

@@ -568,8 +568,7 @@ def stage_track(ctx: StageContext) -> dict:
     otf = load_otf(ctx.run_dir)
     lo, hi = bounds_of(cfg)
     ids = (ctx.results.get("calibrate") or {}).get("cameras") or [f"camera{i}" for i in range(len(cams))]
-    check_coverage(dict(zip(ids, cams, strict=True)), lo, hi, what=f"experiment {cfg.name!r}: the measurement box",
-                   fix="give a box within the cameras' common view (or aim the cameras at it)")
+    check_track_coverage(cfg, dict(zip(ids, cams, strict=True)))  # what --check did, with the calibrated cameras
     seq = [frame_images(ctx.run_dir, f)[0] for f in range(cfg.sequence.frames)]
     fit = [e for e in (ctx.results.get("calibrate") or {}).get("fit_rms_px") or [] if e is not None]
     tr = track_images(seq, cams, otf, dt_s=cfg.flow.dt_s, lower_mm=lo, upper_mm=hi, tracking=cfg.tracking,
