@@ -109,9 +109,10 @@ class OpenPTVSettings:
         Least correspondence quality.
     cn, cnx, cny, csumg : float
         Relative tolerances of target size and brightness.
-    max_displacement_mm : float or None
-        Tracking bounds ``dv*min / dv*max`` [mm per frame] (None: a tenth of the volume's
-        smallest side).
+    max_displacement_mm : float, (3,) float or None
+        Tracking bounds ``dv*min / dv*max`` [mm per frame]: ``-dv..+dv`` on every axis, or
+        per axis (x, y, z) (None: a tenth of the volume's smallest side; the run exports
+        derive it from the flow, :mod:`mitpiv.studies.peer_settings`).
     angle_deg, acceleration : float
         Tracking limits (OpenPTV's ``dangle`` [deg] and ``dacc`` [mm]).
     add_particles : bool
@@ -130,7 +131,7 @@ class OpenPTVSettings:
     cnx: float = 0.02
     cny: float = 0.02
     csumg: float = 0.02
-    max_displacement_mm: float | None = None
+    max_displacement_mm: float | tuple[float, float, float] | None = None
     angle_deg: float = 100.0
     acceleration: float = 0.4
     add_particles: bool = True
@@ -354,8 +355,15 @@ def export_openptv(out_dir, images, cameras, *, lower_mm, upper_mm, first_frame:
         if shape != (h, w):
             raise ConfigError(f"{owner}: camera {k + 1}'s frames are {shape[1]} x {shape[0]} px, the cameras' "
                               f"resolution is {w} x {h}; give each camera its own images.")
-    dv = float(np.min(hi - lo) / 10.0) if settings.max_displacement_mm is None else \
-        check_positive("max_displacement_mm", settings.max_displacement_mm, owner=owner, unit="mm")
+    if settings.max_displacement_mm is None:
+        dv = [float(np.min(hi - lo) / 10.0)] * 3
+    else:
+        md = np.ravel(np.asarray(settings.max_displacement_mm, dtype=object))
+        if md.size not in (1, 3):
+            raise ConfigError(f"{owner}: 'max_displacement_mm' must be one value or three (x, y, z) [mm per frame], "
+                              f"got {settings.max_displacement_mm!r}.")
+        dv = [check_positive("max_displacement_mm", v, owner=owner, unit="mm") for v in md]
+        dv = dv * 3 if len(dv) == 1 else dv
     gain = intensity_gain(stack, bits=bits, owner=owner) if gain is None else \
         check_positive("gain", gain, owner=owner, unit="counts per image unit")
 
@@ -386,7 +394,8 @@ def export_openptv(out_dir, images, cameras, *, lower_mm, upper_mm, first_frame:
         "sequence.par": _lines(*(f"img/cam{k + 1}." for k in range(n_cam)), first_frame, last),
         "criteria.par": _lines(_n(lo[0]), _n(lo[2]), _n(hi[2]), _n(hi[0]), _n(lo[2]), _n(hi[2]), s.cnx, s.cny, s.cn,
                                s.csumg, s.corrmin, s.eps0_mm),
-        "track.par": _lines(-dv, dv, -dv, dv, -dv, dv, s.angle_deg, s.acceleration, int(bool(s.add_particles))),
+        "track.par": _lines(-dv[0], dv[0], -dv[1], dv[1], -dv[2], dv[2], s.angle_deg, s.acceleration,
+                            int(bool(s.add_particles))),
         "targ_rec.par": _lines(*thr[:4], s.discontinuity, f"{s.min_pixels}  {s.max_pixels}",
                                f"{1}  {s.max_pixels}", f"{1}  {s.max_pixels}", s.min_sum_gray, s.cross_size),
         "detect_plate.par": _lines(*thr[:4], s.discontinuity, s.min_pixels, s.max_pixels, 1, s.max_pixels, 1,

@@ -1,7 +1,10 @@
 """Export a finished run folder to files other tools open: ParaView / VTK
 (:func:`export_vtk`, the writers of :mod:`mitpiv.io.vtk`), and the inputs of other particle
 trackers on the run's own images (:func:`export_tracker_inputs`: OpenLPT,
-:mod:`mitpiv.io.openlpt`; OpenPTV, :mod:`mitpiv.io.openptv`).
+:mod:`mitpiv.io.openlpt`; OpenPTV, :mod:`mitpiv.io.openptv`), with the tool's settings
+derived from the run (:mod:`mitpiv.studies.peer_settings`: particle image size, motion per
+frame, calibration error, seeding density; recorded as ``derived_settings`` in
+``mitpiv_export.json``).
 
 A tomo run (:mod:`mitpiv.studies.kinds.tomo`) becomes, in ``out_dir`` (default
 ``RUN/vtk``):
@@ -43,8 +46,9 @@ import numpy as np
 
 from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.progress import Progress, bar
+from mitpiv.studies.shared import run_images
 
-__all__ = ["export_vtk", "export_tracking_vtk", "export_tracker_inputs", "run_images", "found_positions",
+__all__ = ["export_vtk", "export_tracking_vtk", "export_tracker_inputs", "export_images", "run_images", "found_positions",
            "particle_errors", "TRACK_SAMPLES", "TRACKERS"]
 
 log = logging.getLogger(__name__)
@@ -276,46 +280,33 @@ def _flow_at(flow, pts, t_s) -> np.ndarray:
 TRACKERS = ("openlpt", "openptv")
 
 
-def run_images(run_dir) -> dict:
-    """The images of a run for export: the sensor stage's counts when the run has one, else
-    the render stage's radiance.
+def _derive_settings(run: Path, tool: str, box: dict, options: dict) -> tuple[dict | None, str]:
+    """Fill ``options`` with the settings (and OpenLPT's voxel) derived from the run
+    (:mod:`mitpiv.studies.peer_settings`) where the caller gave none; returns (the record
+    of the derivation or None, what the settings came from)."""
+    import warnings
 
-    Returns
-    -------
-    dict: ``source`` (``"sensor"`` / ``"render"``), ``sensors`` (ids, sorted), ``frames``
-    (frame numbers, sorted), ``files`` (per sensor, the EXR paths of its frames), ``cameras``
-    (per sensor, the camera from the first frame's metadata).
+    from mitpiv.errors import MitpivWarning
+    from mitpiv.studies import peer_settings as ps
 
-    Raises
-    ------
-    FileFormatError
-        No rendered images (the render stage has not finished), sensors with differing
-        frames, or images without a camera in their metadata.
-    """
-    from mitpiv.io import camera_from_metadata, read_exr
-
-    run = Path(run_dir)
-    _experiment(run)
-    source = next((s for s in ("sensor", "render") if (run / s / "stage.json").is_file()), None)
-    files = sorted((run / source).glob("*_frame*.exr")) if source else []
-    if not files:
-        raise FileFormatError(f"export: the run {str(run)!r} has no rendered images (no finished render stage); "
-                              f"run 'mitpiv run EXPERIMENT --out {run}' first.")
-    by_sensor: dict[str, dict[int, Path]] = {}
-    for f in files:
-        sid, _, num = f.stem.rpartition("_frame")
-        if not num.isdigit():
-            continue
-        by_sensor.setdefault(sid, {})[int(num)] = f
-    sensors = sorted(by_sensor)
-    frames = sorted(by_sensor[sensors[0]])
-    for s in sensors:
-        if sorted(by_sensor[s]) != frames:
-            raise FileFormatError(f"export: sensor {s!r} of {str(run / source)!r} has frames {sorted(by_sensor[s])}, "
-                                  f"sensor {sensors[0]!r} has {frames}; re-run the render stage.")
-    cameras = [camera_from_metadata(read_exr(by_sensor[s][frames[0]])[1]) for s in sensors]
-    return {"source": source, "sensors": sensors, "frames": frames,
-            "files": [[by_sensor[s][k] for k in frames] for s in sensors], "cameras": cameras}
+    need = ("settings", "voxel_mm") if tool == "openlpt" else ("settings",)
+    if all(k in options for k in need):
+        return None, "given"
+    applied = {k: "given" if k in options else "derived" for k in need}
+    try:
+        if tool == "openlpt":
+            settings, vox, rec = ps.openlpt_settings_for_run(run, voxel_mm=options.get("voxel_mm"), **box)
+            options.setdefault("voxel_mm", vox)
+        else:
+            settings, rec = ps.openptv_settings_for_run(run, **box)
+    except FileFormatError as e:  # images without a truth: the tool's own defaults, said so
+        warnings.warn(f"export: {tool} settings are the tool's defaults, nothing to derive them from: {e}",
+                      MitpivWarning, stacklevel=3)
+        return {"error": str(e)}, "defaults"
+    options.setdefault("settings", settings)
+    rec["applied"] = applied
+    given = [k for k, v in applied.items() if v == "given"]
+    return rec, "derived" + (f" ({', '.join(given)} given)" if given else "")
 
 
 def export_tracker_inputs(run_dir, out_dir, *, tool: str, progress: Progress = None, **options) -> dict:
@@ -333,13 +324,21 @@ def export_tracker_inputs(run_dir, out_dir, *, tool: str, progress: Progress = N
     progress : optional
         Progress bar control (:mod:`mitpiv.progress`).
     **options
-        Passed to the exporter (``bits``, ``gain``, ``settings``, ...). The volume is the
-        experiment's seeding box; OpenLPT's frame rate is 1 / the truth's frame interval.
+        Passed to the exporter (``bits``, ``gain``, ``settings``, ``voxel_mm``, ...). The
+        volume is the experiment's seeding box; OpenLPT's frame rate is 1 / the truth's frame
+        interval. Without ``settings`` (and, for OpenLPT, ``voxel_mm``) the tool's settings
+        are derived from the run (:mod:`mitpiv.studies.peer_settings`: particle image size,
+        motion per frame, calibration error, seeding density); an explicit one wins.
 
     Returns
     -------
     dict
-        The exporter's manifest, with ``run``, ``source`` and ``sensors`` added.
+        The exporter's manifest, with ``run``, ``source``, ``sensors``, ``settings_from``
+        (``"derived"``, ``"derived (voxel_mm given)"``, ``"given"``, or ``"defaults"``: the
+        exporter's defaults when the run has nothing to derive them from, a warning says why)
+        and ``derived_settings`` (the derived quantities, their sources and the rules mapping
+        them to the settings; ``{"error": reason}`` with the defaults; absent when everything
+        was given) added.
 
     Raises
     ------
@@ -358,6 +357,7 @@ def export_tracker_inputs(run_dir, out_dir, *, tool: str, progress: Progress = N
         raise FileFormatError(f"export: {str(run / 'experiment.json')!r} has no [seeding] box_min_mm / box_max_mm "
                               "(the volume the tracker observes).")
     box = {"lower_mm": seeding["box_min_mm"], "upper_mm": seeding["box_max_mm"]}
+    derived, settings_from = _derive_settings(run, tool, box, options)
     if tool == "openlpt":
         from mitpiv.io.openlpt import export_openlpt
 
@@ -374,8 +374,66 @@ def export_tracker_inputs(run_dir, out_dir, *, tool: str, progress: Progress = N
         from mitpiv.io.openptv import export_openptv
 
         manifest = export_openptv(out_dir, imgs["files"], imgs["cameras"], **box, progress=progress, **options)
-    manifest.update(run=str(run), source=imgs["source"], sensors=imgs["sensors"])
+    manifest.update(run=str(run), source=imgs["source"], sensors=imgs["sensors"], settings_from=settings_from)
+    if derived is not None:
+        manifest["derived_settings"] = derived
     from mitpiv.io import write_json
 
     write_json(Path(out_dir) / "mitpiv_export.json", manifest)
+    return manifest
+
+
+def export_images(run_dir, out_dir, *, bits: int = 16, progress: Progress = None) -> dict:
+    """Write a run's camera images as integer TIFF frames for any 2-D PIV code (OpenPIV,
+    PIVlab, ...): ``<sensor>_<frame:04d>.tif`` in ``out_dir`` and ``mitpiv_export.json`` (the
+    frames, their times, each camera's pixel pitch and the scaling).
+
+    The sensor stage's counts are written as they are (gain 1) when they are whole numbers
+    that fit in ``bits``; radiance (a run without a sensor stage), or counts that do not fit,
+    are scaled by one gain for the sequence (:func:`mitpiv.io.tiff.intensity_gain`). The
+    pixel ``(row, column)`` of a TIFF is the image pixel mitpiv's cameras project to: x along
+    columns, y down the rows (the origin at the top-left corner), as PIV codes read images.
+
+    Returns the manifest (``files`` per sensor, ``gain``, ``bits``, ``times_s``).
+    """
+    from mitpiv.io import read_truth, write_json
+    from mitpiv.io.tiff import BITS, intensity_gain, load_frame, quantise, write_tiff
+
+    if bits not in BITS:
+        raise ConfigError(f"export: 'bits' must be one of {BITS}, got {bits!r}.")
+    run = Path(run_dir)
+    imgs = run_images(run)
+    top = 2**bits - 1
+    stack = imgs["files"]
+    gain = 1.0
+    if imgs["source"] == "sensor":
+        frames = [load_frame(f) for cam in stack for f in cam]
+        fits = all(np.all(a == np.rint(a)) and a.min() >= 0 and a.max() <= top for a in frames)
+        del frames
+        if not fits:
+            gain = intensity_gain(stack, bits=bits, owner="export")
+    else:
+        gain = intensity_gain(stack, bits=bits, owner="export")
+    truth = next((run / s / "truth.npz" for s in ("particles", "field") if (run / s / "truth.npz").is_file()), None)
+    times = read_truth(truth)["times_s"] if truth is not None else None
+    out = Path(out_dir)
+    files = {}
+    with bar(len(stack) * len(imgs["frames"]), desc="tiff export", progress=progress, unit="image") as b:
+        for sid, cam in zip(imgs["sensors"], stack, strict=True):
+            files[sid] = []
+            for k, f in zip(imgs["frames"], cam, strict=True):
+                name = f"{sid}_{k:04d}.tif"
+                write_tiff(out / name, quantise(load_frame(f), gain, bits))
+                files[sid].append(name)
+                b.update()
+    manifest = {"run": str(run), "source": imgs["source"], "sensors": imgs["sensors"], "frames": imgs["frames"],
+                "times_s": None if times is None else [float(times[k]) for k in imgs["frames"]],
+                "files": files, "bits": bits, "gain": gain,
+                "scaling": f"value = round(clip(image * gain, 0, {top}))" + (" (the camera's counts as they are)"
+                                                                             if gain == 1.0 else ""),
+                "pixel_pitch_um": {s: float(c.pixel_pitch_um) for s, c in zip(imgs["sensors"], imgs["cameras"],
+                                                                               strict=True)
+                                   if hasattr(c, "pixel_pitch_um")},
+                "pixel_convention": "x along columns, y down the rows; pixel i spans [i, i + 1)"}
+    write_json(out / "mitpiv_export.json", manifest)
     return manifest

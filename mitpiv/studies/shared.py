@@ -31,7 +31,7 @@ from typing import Annotated
 import numpy as np
 from pydantic import BaseModel, Field, model_validator
 
-from mitpiv.errors import ConfigError
+from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.progress import Progress
 from mitpiv.studies.schema import Table, discriminated, model_from_signature
 
@@ -315,7 +315,6 @@ def load_scene_rig(xml, *, params: dict | None = None, sensors=None, where: str 
     """The :class:`SceneRig` of a scene XML (its ``sensors``, default all), from its sensors
     and laser sheets alone (:func:`mitpiv.render.scene.load_rig`: no particle file, no Mie
     table). A sensor mitpiv does not model (Mitsuba's own ``perspective``) is left out."""
-    from mitpiv.errors import FileFormatError
     from mitpiv.io import camera_from_metadata
     from mitpiv.render.render import sensor_model
     from mitpiv.render.scene import load_rig
@@ -619,6 +618,50 @@ def read_tracks(path):
     z = read_npz(path, what="tracks", required=("positions_mm", "intensities", "dt_s"))
     return Tracks(z["positions_mm"], z["intensities"], float(z["dt_s"]), z.get("velocities_mm_s"),
                   z.get("accelerations_mm_s2"), z.get("raw_positions_mm"))
+
+
+def run_images(run_dir) -> dict:
+    """The images of a run for export: the sensor stage's counts when the run has one, else
+    the render stage's radiance.
+
+    Returns
+    -------
+    dict: ``source`` (``"sensor"`` / ``"render"``), ``sensors`` (ids, sorted), ``frames``
+    (frame numbers, sorted), ``files`` (per sensor, the EXR paths of its frames), ``cameras``
+    (per sensor, the camera from the first frame's metadata).
+
+    Raises
+    ------
+    FileFormatError
+        No rendered images (the render stage has not finished), sensors with differing
+        frames, or images without a camera in their metadata.
+    """
+    from mitpiv.io import camera_from_metadata, read_exr
+
+    run = Path(run_dir)
+    if not (run / "experiment.json").is_file():
+        raise FileFormatError(f"export: {str(run)!r} is not a run folder (no experiment.json); give the --out folder "
+                              "of 'mitpiv run'.")
+    source = next((s for s in ("sensor", "render") if (run / s / "stage.json").is_file()), None)
+    files = sorted((run / source).glob("*_frame*.exr")) if source else []
+    if not files:
+        raise FileFormatError(f"export: the run {str(run)!r} has no rendered images (no finished render stage); "
+                              f"run 'mitpiv run EXPERIMENT --out {run}' first.")
+    by_sensor: dict[str, dict[int, Path]] = {}
+    for f in files:
+        sid, _, num = f.stem.rpartition("_frame")
+        if not num.isdigit():
+            continue
+        by_sensor.setdefault(sid, {})[int(num)] = f
+    sensors = sorted(by_sensor)
+    frames = sorted(by_sensor[sensors[0]])
+    for s in sensors:
+        if sorted(by_sensor[s]) != frames:
+            raise FileFormatError(f"export: sensor {s!r} of {str(run / source)!r} has frames {sorted(by_sensor[s])}, "
+                                  f"sensor {sensors[0]!r} has {frames}; re-run the render stage.")
+    cameras = [camera_from_metadata(read_exr(by_sensor[s][frames[0]])[1]) for s in sensors]
+    return {"source": source, "sensors": sensors, "frames": frames,
+            "files": [[by_sensor[s][k] for k in frames] for s in sensors], "cameras": cameras}
 
 
 def run_truth(run: Path, stage: str) -> dict:

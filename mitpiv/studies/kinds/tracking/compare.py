@@ -46,7 +46,10 @@ OpenLPT settings derived from the experiment (``openlpt_settings`` overrides any
 :class:`mitpiv.io.openlpt.OpenLPTSettings`' fields), each from OpenLPT's own documentation or
 source (openlpt 2.2.4; its sources github.com/JHU-NI-LAB/OpenLPT_GUI 2.1.8, the sample
 ``test/inputs/test_STB``, the GUI's ``gui/docs/settings.html`` and
-``gui/views/tracking_settings_view.py``):
+``gui/views/tracking_settings_view.py``). The derivation is shared with ``mitpiv export
+--openlpt`` (:mod:`mitpiv.studies.peer_settings`, which reads the quantities from the run
+folder and says where each came from); this stage gives it the measurement box, the
+calibrated cameras and the ``[tracking]`` settings below:
 
 * voxel: one pixel in object space at the box centre (``mm_per_px``), as OpenLPT's sample
   (0.04 mm voxels at 0.041 mm/px) and its GUI default (view volume / 1000).
@@ -71,7 +74,8 @@ source (openlpt 2.2.4; its sources github.com/JHU-NI-LAB/OpenLPT_GUI 2.1.8, the 
   density (0.82, 0.91, 1.39 px at 0.01, 0.02, 0.05 ppp); it now stays near 0.8-0.9 px (the
   radius is 1.5 px at every density of the study).
 * initial-phase search radius: the displacement per frame of ``[tracking]
-  velocity_guess_mm_s`` plus ``[tracking] search_px``. OpenLPT links the initial frames to the
+  velocity_guess_mm_s`` (0 without one: the comparison gives OpenLPT what mitpiv's STB gets,
+  where the export derives the motion from the run's flow) plus ``[tracking] search_px``. OpenLPT links the initial frames to the
   nearest object within this radius of the position its predictive field predicts
   (``STB::buildTrackFromPredField``), so ``search_px`` alone would do with a good field; on the
   study's images it made no difference (``search_px`` = 4 voxels against 8.5: yield 0.110
@@ -82,7 +86,8 @@ source (openlpt 2.2.4; its sources github.com/JHU-NI-LAB/OpenLPT_GUI 2.1.8, the 
   displacement histogram spans +-2 r).
 * IPR: OpenLPT's sample loop counts (2 full-camera loops, 2 per reduced camera set; 4 full
   loops changed nothing at 0.05 ppp: the tolerance grows by 1.5 per loop); the 2-D tolerance
-  ``[tracking] tolerance_px``, the 3-D one half of it (1 voxel, the sample's, found 34 %
+  ``[tracking] tolerance_px`` (plus 3 times the calibrate stage's largest fit RMS with
+  ``[calibration] model = "pinhole"``), the 3-D one half of it (1 voxel, the sample's, found 34 %
   instead of 33 % of frame 0's particles at 0.05 ppp, with more ghosts: 43 % against 39 %).
 * ghost threshold ``[tracking] min_intensity`` (0.1, the sample's; the GUI's 0.01 changed
   nothing): both drop a candidate whose intensity score is below that fraction of the mean
@@ -114,6 +119,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from mitpiv.errors import ConfigError
+from mitpiv.studies import peer_settings as _peers
 from mitpiv.studies.kinds.tracking.scoring import (
     binned_error,
     eulerian_grid,
@@ -123,7 +129,7 @@ from mitpiv.studies.kinds.tracking.scoring import (
     write_tracks_npz,
 )
 from mitpiv.studies.schema import Table
-from mitpiv.studies.shared import Stage, StageContext, bounds_of, frame_images, null_metrics, run_truth
+from mitpiv.studies.shared import Stage, StageContext, bounds_of, frame_images, null_metrics
 
 PosFloat = Annotated[float, Field(gt=0)]
 Window = Annotated[int, Field(ge=4)] | tuple[Annotated[int, Field(ge=4)], Annotated[int, Field(ge=4)],
@@ -182,8 +188,8 @@ def _scale(cfg, run: Path) -> float:
 
 
 #: The smallest OpenLPT particle radius [px] whose subtraction window (``round(2 r)`` px) is
-#: centred on the particle: 3 x 3 px.
-MIN_PARTICLE_RADIUS_PX = 1.5
+#: centred on the particle: 3 x 3 px (:data:`mitpiv.studies.peer_settings.MIN_PARTICLE_RADIUS_PX`).
+MIN_PARTICLE_RADIUS_PX = _peers.MIN_PARTICLE_RADIUS_PX
 
 
 def particle_radius_px(run: Path, *, default: float = 2.0) -> float:
@@ -201,36 +207,26 @@ def particle_radius_px(run: Path, *, default: float = 2.0) -> float:
     f = run / "otf" / "otf.json"
     if not f.is_file():
         return default
-    d = read_json(f)
-    a, b, c = (np.asarray(d[k], dtype=np.float64) for k in ("a_per_px2", "b_per_px2", "c_per_px2"))
-    lam = 0.5 * (a + c) - np.sqrt((0.5 * (a - c)) ** 2 + b**2)
-    lam = lam[np.isfinite(lam) & (lam > 0)]
-    if lam.size == 0:
-        return default
-    hwhm = float(np.sqrt(2.0 * np.log(2.0) / lam.min()))
-    return max(MIN_PARTICLE_RADIUS_PX, float(np.ceil(2.0 * hwhm - 1e-9)) / 2.0)
+    return _peers.radius_from_hwhm(_peers.otf_hwhm_px(read_json(f)), default=default)
 
 
 def openlpt_settings(cfg, run: Path):
-    """The :class:`~mitpiv.io.openlpt.OpenLPTSettings` and voxel [mm] for a run (module notes)."""
+    """The :class:`~mitpiv.io.openlpt.OpenLPTSettings` and voxel [mm] for a run (module
+    notes): the shared derivation of :mod:`mitpiv.studies.peer_settings` (the one
+    ``mitpiv export --openlpt`` uses) on the measurement box and the calibrated cameras, with
+    the experiment's ``[tracking]`` velocity guess for the motion per frame (0 without one, as
+    mitpiv's STB gets it), and ``[compare] openlpt_settings`` over it."""
+    t = cfg.tracking
+    lo, hi = bounds_of(cfg)
     from dataclasses import replace
 
-    from mitpiv.io.openlpt import OpenLPTSettings
-
-    t = cfg.tracking
-    vox = _scale(cfg, run)
-    guess = 0.0 if t.velocity_guess_mm_s is None else float(np.linalg.norm(t.velocity_guess_mm_s)) * cfg.flow.dt_s
-    cover_vox = guess / vox + t.search_px
-    p0 = run_truth(run, "field")["positions_mm"][0]
-    n = max(int(np.all(np.isfinite(p0), axis=1).sum()), 1)
-    lo, hi = bounds_of(cfg)
-    spacing_mm = float(np.prod(hi - lo) / n) ** (1.0 / 3.0)
-    s = OpenLPTSettings(search_radius_vox=round(cover_vox, 3), pred_search_vox=round(1.5 * cover_vox, 3),
-                        tolerance_2d_px=t.tolerance_px, tolerance_3d_vox=0.5 * t.tolerance_px,
-                        neighbour_spacing_vox=round(spacing_mm / vox, 3), ghost_threshold=t.min_intensity,
-                        particle_radius_px=particle_radius_px(run))
+    q = replace(_peers.run_quantities(run, lower_mm=lo, upper_mm=hi, calibrated=True), tolerance_px=t.tolerance_px,
+                search_px=t.search_px, ghost_threshold=t.min_intensity)
+    # the experiment's guess, as mitpiv's STB gets it (0 without one): OpenLPT is not told the truth's motion
+    motion = 0.0 if t.velocity_guess_mm_s is None else float(np.linalg.norm(t.velocity_guess_mm_s)) * cfg.flow.dt_s
     over = {k: (tuple(v) if isinstance(v, list) else v) for k, v in cfg.compare.openlpt_settings.items()}
-    return replace(s, **over), vox
+    return _peers.openlpt_settings_from(q, motion_mm=motion, particle_radius_px=particle_radius_px(run), **over), \
+        q.voxel_mm
 
 
 def _null_result(reason: str, *, status: str, extra: dict | None = None) -> dict:
@@ -244,7 +240,7 @@ def stage_openlpt(ctx: StageContext) -> dict:
     from mitpiv.errors import MitpivError
     from mitpiv.io import write_npz
     from mitpiv.io.openlpt import export_openlpt
-    from mitpiv.studies.export import run_images
+    from mitpiv.studies.shared import run_images
     from mitpiv.tracking.peers import run_openlpt
 
     cfg, run, c = ctx.cfg, ctx.run_dir, ctx.cfg.compare
