@@ -13,6 +13,7 @@ import argparse
 import json
 import logging
 import math
+import os
 import signal
 import sys
 
@@ -570,7 +571,11 @@ def cmd_run(args) -> int:
     if args.out is None:
         raise MitpivError("run: give --out DIR (the run folder), or --check to validate only.")
     _out_dir(args.out)
-    result = run_experiment(args.experiment, args.out, overrides=overrides, progress=_progress(args))
+    result = run_experiment(args.experiment, args.out, overrides=overrides, until=args.until,
+                            progress=_progress(args))
+    if args.until is not None:
+        print(f"{result.name}: stopped after the {args.until} stage ({', '.join(result.stages)}) -> {args.out}")
+        return 0
     print(f"{result.headline()} -> {args.out}/report/report.md")
     return 0
 
@@ -652,13 +657,33 @@ def _check_scheduler(address: str, timeout_s: float = 3.0) -> None:
 
 
 def cmd_export(args) -> int:
-    if not (args.vtk or args.openlpt or args.openptv):
+    if not (args.vtk or args.openlpt or args.openptv or args.davis or args.tiff):
         print("mitpiv: error: export: choose a format: --vtk (ParaView / VTK files), --openlpt DIR or --openptv DIR "
-              "(tracker inputs).", file=sys.stderr)
+              "(tracker inputs), --davis DIR (LaVision DaVis sets), --tiff DIR (image frames for any PIV code).",
+              file=sys.stderr)
         return 2
-    for flag, out in (("--out", args.out), ("--openlpt", args.openlpt), ("--openptv", args.openptv)):
+    for flag, out in (("--out", args.out), ("--openlpt", args.openlpt), ("--openptv", args.openptv),
+                      ("--davis", args.davis), ("--tiff", args.tiff)):
         if out is not None:  # every output folder checked before anything is exported
             _out_dir(out, flag)
+    if args.tiff:
+        from mitpiv.studies.export import export_images
+
+        m = export_images(args.run, args.tiff, progress=_progress(args))
+        print(f"tiff: {len(m['sensors'])} cameras x {len(m['frames'])} frames ({m['source']} images, {m['bits']}-bit, "
+              f"gain {m['gain']:.6g}) -> {args.tiff}")
+        if not (args.vtk or args.openlpt or args.openptv or args.davis):
+            return 0
+    if args.davis:
+        from mitpiv.studies.export_davis import export_davis
+
+        m = export_davis(args.run, args.davis, progress=_progress(args))
+        cal = m.get("calibration")
+        print(f"davis: {len(m['sensors'])} cameras x {len(m['times_s'])} frames ({m['source']} images, "
+              f"{m['images']['dtype']})" + (f", calibration plate at {len(cal['z_positions_mm'])} z positions"
+                                            if cal else "") + f" -> {args.davis}")
+        if not (args.vtk or args.openlpt or args.openptv):
+            return 0
     if args.openlpt or args.openptv:
         from mitpiv.studies.export import export_tracker_inputs
 
@@ -667,13 +692,42 @@ def cmd_export(args) -> int:
                 opts = {"undistort": True} if tool == "openlpt" and args.undistort else {}
                 m = export_tracker_inputs(args.run, out, tool=tool, progress=_progress(args), **opts)
                 print(f"{tool}: {m['n_cameras']} cameras x {m['n_frames']} frames ({m['source']} images, "
-                      f"{m['bits']}-bit, gain {m['gain']:.6g}) -> {out}")
+                      f"{m['bits']}-bit, gain {m['gain']:.6g}; settings {m.get('settings_from', 'given')}"
+                      f"{' from the run' if m.get('settings_from', '').startswith('derived') else ''}"
+                      f") -> {out}")
         if not args.vtk:
             return 0
     from mitpiv.studies.export import export_vtk
 
     files = export_vtk(args.run, args.out, progress=_progress(args))
     print(f"{len(files)} VTK files -> {files[-1].parent} (open {files[-1].name} in ParaView)")
+    return 0
+
+
+def cmd_score(args) -> int:
+    from mitpiv.studies.score import score
+
+    if args.out is not None:
+        _out_dir(args.out)
+    m = score(args.run, args.result, out_dir=args.out, what=args.what, fmt=args.format, camera=args.camera,
+              frames=args.frames, window=args.window, length_unit=args.length_unit, velocity_unit=args.velocity_unit,
+              flip_y=args.flip_y, plane_z_mm=args.plane_z_mm, radius_mm=args.radius_mm, first_frame=args.first_frame,
+              group=args.group, davis_frame=args.davis_frame, force=args.force)
+
+    def f(x, spec=".4g"):
+        return "n/a" if x is None else (", ".join(format(v, spec) for v in x) if isinstance(x, list) else format(x, spec))
+
+    if m["kind"] == "vectors-2d":
+        line = (f"{m['n_scored']} vectors on {m['camera']}: RMS error {f(m['rms_px'])} px (x, y), "
+                f"{f(m['error_outlier_fraction'], '.2%')} above {m['error_outlier_px']:g} px")
+    elif m["kind"] == "vectors-3d":
+        line = (f"{m['n']} vectors: RMS error {f(m['rms_vox'])} voxels (x, y, z), "
+                f"{f(m['error_outlier_fraction'], '.2%')} above {m['error_outlier_vox']:g} voxel")
+    else:
+        line = (f"{m['kind']}: yield {f(m['yield'], '.2%')}, ghosts {f(m['ghost_fraction'], '.2%')}, position error "
+                f"{f(m['position_error_mm'])} mm")
+    flagged = f" (FLAGGED: {len(m['flags'])} check(s) failed, scored with --force)" if m["flags"] else ""
+    print(f"{line}{flagged} -> {os.path.dirname(m['files'][0])}/score.md")
     return 0
 
 
@@ -875,6 +929,8 @@ def main(argv=None) -> int:
     need.add_argument("--out", default=None, metavar="DIR",
                       help="run folder, required unless --check (stages resume when rerun)")
     need.add_argument("--check", action="store_true", help="validate the experiment (every table) and run nothing")
+    x.add_argument("--until", default=None, metavar="STAGE", help="stop after this stage (e.g. render or sensor: "
+                   "the images alone, for processing in another tool; 'mitpiv score' scores its result)")
     x.add_argument("--set", action="append", metavar="TABLE.FIELD=VALUE",
                    help="set any experiment field (a TOML value), e.g. --set piv.windows=[48,32]; see 'mitpiv schema'")
     for flag, key in RUN_FLAGS.items():
@@ -910,9 +966,43 @@ def main(argv=None) -> int:
     ex.add_argument("--out", default=None, help="output folder (default RUN/vtk)")
     ex.add_argument("--openlpt", default=None, metavar="DIR", help="OpenLPT STB inputs (config, camera files, TIFFs)")
     ex.add_argument("--openptv", default=None, metavar="DIR", help="OpenPTV inputs (parameters, .ori/.addpar, TIFFs)")
+    ex.add_argument("--davis", default=None, metavar="DIR", help="LaVision DaVis: image set with frame times, "
+                    "calibration-plate image set, truth particle field (lvpyio)")
+    ex.add_argument("--tiff", default=None, metavar="DIR", help="16-bit TIFF frames of every camera for any 2-D PIV "
+                    "code (<sensor>_<frame>.tif; the camera counts as they are)")
     ex.add_argument("--undistort", action="store_true", help="--openlpt: resample distorted cameras' frames to "
                     "undistorted pinhole images (openlpt 2.2.4 cannot stereo-match distorted cameras)")
     ex.set_defaults(func=cmd_export)
+    so = sub.add_parser("score", help="score another tool's result (a 2-D or 3-D vector field, particles or tracks) "
+                        "against a run's truth with mitpiv's own metrics")
+    so.add_argument("run", help="run folder of 'mitpiv run' (its truth and cameras)")
+    so.add_argument("result", help="the tool's result: DaVis .vc7/.set, OpenPIV .txt, .csv, .npz, .h5; OpenLPT or "
+                    "OpenPTV result folders; particle CSV (frame, x, y, z[, track])")
+    so.add_argument("--out", default=None, help="output folder (default RESULT_score beside the result)")
+    so.add_argument("--what", choices=["vectors", "particles"], default=None, help="what the result holds (default: "
+                    "from its format)")
+    so.add_argument("--format", default=None, choices=["davis", "openpiv", "csv", "npz", "hdf5", "openlpt", "openptv"],
+                    help="the result's format (default: from its name)")
+    so.add_argument("--camera", default=None, help="a 2-D field: the camera it was measured on (default the run's first)")
+    so.add_argument("--frames", type=_int_in(0), nargs=2, default=[0, 1], metavar=("A", "B"),
+                    help="the run frames of the field's two images (default 0 1)")
+    so.add_argument("--window", type=float, default=None, help="vector fields: the interrogation window's side in the "
+                    "field's length unit (the truth is averaged over it)")
+    so.add_argument("--length-unit", default=None, help="positions' unit where the file does not say: px, mm, m, cm, um")
+    so.add_argument("--velocity-unit", default=None, help="vectors' unit where the file does not say: displacements "
+                    "px, vox, mm, m or velocities px/s, mm/s, m/s")
+    so.add_argument("--flip-y", action="store_true", help="the field's y axis points up (OpenPIV's "
+                    "transform_coordinates): mirror y and negate v")
+    so.add_argument("--plane-z-mm", type=float, default=None, help="a 2-D field in mm: the world plane z it lies on "
+                    "(default the volume's middle)")
+    so.add_argument("--radius-mm", type=float, default=None, help="particles: the match radius (default the run's own)")
+    so.add_argument("--first-frame", type=_int_in(0), default=0, help="particles: the run frame of the result's first "
+                    "frame (default 0)")
+    so.add_argument("--group", default=None, help="HDF5: the group holding x, y, z, u, v, w")
+    so.add_argument("--davis-frame", type=_int_in(0), default=0, help="DaVis vector set: the frame to score")
+    so.add_argument("--force", action="store_true", help="score a result that fails the unit / axis / frame checks "
+                    "(the flags are recorded)")
+    so.set_defaults(func=cmd_score)
     b = sub.add_parser("bench", help="benchmarks: 'accuracy-time' measures every accuracy knob's time and error")
     b.add_argument("which", choices=["accuracy-time"], help="the benchmark to run")
     b.add_argument("--out", default="out/accuracy-time", help="output folder (tables, CSV, Pareto plots)")

@@ -20,6 +20,8 @@ OUTPUTS = {
                            "run/vtk/piv.vts"],
     "distortion_and_q.py": ["distortion_and_q.png"],
     "sweep.py": ["results.csv", "sweep.png"],
+    "score_openpiv.py": ["tiff/cam0_0000.tif", "field_16.txt", "score_32/score.md", "score_16/score.json",
+                         "score_16/velocity_error.png", "score_16_up/score.json"],
     "preview_rig.py": ["tomo4/rig.png", "tomo4/views.png", "tomo4/rig.vtu", "misaimed/rig.png", "misaimed/views.png"],
 }
 
@@ -43,6 +45,10 @@ def test_example_runs_small(script, tmp_path, monkeypatch, capsys):
         assert q["undistorted"] < q["true"] - 0.02
     if script == "preview_rig.py":  # the committed rig is seen whole, the misaimed camera warned about
         assert "cam0: sees 100 %" in text and "camera 'cam0' sees 7" in text
+    if script == "score_openpiv.py":  # scored, a y-up field refused, then scored alike with --flip-y
+        rms = [float(line.split("RMS error ")[1].split(" / ")[0]) for line in text.splitlines()
+               if line.startswith("OpenPIV ")]
+        assert len(rms) == 2 and max(rms) < 0.4 and "refused: score:" in text and "--flip-y: RMS error" in text
     if script == "sweep.py":
         import pandas as pd
 
