@@ -19,9 +19,16 @@ displacement of the true particles inside each window, weighted by their image
 intensities). Then the 16 px field is saved again after OpenPIV's ``transform_coordinates``
 (y pointing up), which ``mitpiv score`` refuses and ``--flip-y`` scores.
 
+Last, the run goes out as a LaVision DaVis set (``mitpiv export --davis``: images with
+frame times, a calibration-plate set rendered through the same camera, the truth as a
+particle field), and the 16 px field comes back as a calibrated DaVis vector field (the
+OpenPIV vectors mapped onto the sheet plane in mm and m/s, written by LaVision's lvpyio),
+scored from the ``.vc7`` like the text file.
+
 Writes into out/examples/score_openpiv/: run/ (the rendered run), tiff/ (the exported
 frames), field_32.txt, field_16.txt, score_32/ and score_16/ (score.json, score.md,
-velocity_error.png; also docs/examples/score_openpiv.png).
+velocity_error.png; also docs/examples/score_openpiv.png), davis/ (the DaVis export),
+field_16.vc7 and score_16_davis/.
 """
 
 import argparse
@@ -97,3 +104,32 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore", MitpivWarning)
     up = score(run, out / "field_16_up.txt", window=16, out_dir=out / "score_16_up", flip_y=True)
 print(f"with --flip-y: RMS error {up['rms_px'][0]:.3f} / {up['rms_px'][1]:.3f} px, as the y-down file")
+
+# 4. DaVis: the run as a DaVis project's input (image set with frame times, a calibration-plate
+# set rendered through the same camera, the truth as a particle field), and a DaVis vector
+# field back: the 16 px field mapped onto the sheet (z = 0) in mm and m/s, as a calibrated
+# planar DaVis result holds it, written by lvpyio and scored from the .vc7
+from mitpiv.io import camera_from_metadata, read_exr  # noqa: E402
+from mitpiv.io.davis import read_davis_images, write_davis_vectors  # noqa: E402
+from mitpiv.studies.export_davis import export_davis  # noqa: E402
+
+d = export_davis(run, out / "davis", n_planes=2 if args.small else 3)
+back = read_davis_images(out / "davis" / "Images.set")
+print(f"DaVis set: {back['images'].shape[0]} camera x {back['images'].shape[1]} frames at "
+      f"{', '.join(f'{t * 1e3:g} ms' for t in back['times_s'])}; calibration plate at "
+      f"{d['calibration']['z_positions_mm']} mm -> {out / 'davis' / 'README.txt'}")
+cam = camera_from_metadata(read_exr(run / "render" / "cam0_frame000.exr")[1])
+xs, ys = fields[16][0][0], fields[16][1][:, 0]  # OpenPIV's window centres [px]: columns, rows
+o, ray = cam.pixel_to_ray(np.stack(np.meshgrid(xs, ys), axis=-1))
+world = o + ray * (-o[2] / ray[..., 2:3])  # the rays met with the sheet's plane z = 0
+dt = m["times_s"][1] - m["times_s"][0]
+end = cam.pixel_to_ray(np.stack(np.meshgrid(xs, ys), axis=-1)
+                       + np.stack([np.ma.filled(fields[16][2], np.nan), np.ma.filled(fields[16][3], np.nan)], -1))[1]
+world_b = o + end * (-o[2] / end[..., 2:3])
+vel_m_s = (world_b - world)[..., :2] / dt * 1e-3
+# DaVis's axes ascend: the rows' world y descends (the image's y points down), so flip them
+write_davis_vectors(out / "field_16.vc7", world[0, :, 0], world[::-1, 0, 1], None, vel_m_s[::-1, :, 0],
+                    vel_m_s[::-1, :, 1], length_unit="mm", velocity_unit="m/s", dt_s=dt)
+win_mm = 16 * float(np.median(np.diff(world[0, :, 0]))) / 8  # 16 px at the grid's 8 px step
+dv = score(run, out / "field_16.vc7", window=win_mm, plane_z_mm=0.0, out_dir=out / "score_16_davis")
+print(f"DaVis .vc7 in mm and m/s: RMS error {dv['rms_px'][0]:.3f} / {dv['rms_px'][1]:.3f} px, as the text file")

@@ -21,7 +21,8 @@ OUTPUTS = {
     "distortion_and_q.py": ["distortion_and_q.png"],
     "sweep.py": ["results.csv", "sweep.png"],
     "score_openpiv.py": ["tiff/cam0_0000.tif", "field_16.txt", "score_32/score.md", "score_16/score.json",
-                         "score_16/velocity_error.png", "score_16_up/score.json"],
+                         "score_16/velocity_error.png", "score_16_up/score.json", "davis/Images.set",
+                         "davis/Calibration.set", "field_16.vc7", "score_16_davis/score.json"],
     "preview_rig.py": ["tomo4/rig.png", "tomo4/views.png", "tomo4/rig.vtu", "misaimed/rig.png", "misaimed/views.png"],
 }
 
@@ -49,6 +50,8 @@ def test_example_runs_small(script, tmp_path, monkeypatch, capsys):
         rms = [float(line.split("RMS error ")[1].split(" / ")[0]) for line in text.splitlines()
                if line.startswith("OpenPIV ")]
         assert len(rms) == 2 and max(rms) < 0.4 and "refused: score:" in text and "--flip-y: RMS error" in text
+        davis = float(text.split("DaVis .vc7 in mm and m/s: RMS error ")[1].split(" / ")[0])
+        assert abs(davis - rms[1]) < 0.02  # the same vectors, windows mapped to mm and back
     if script == "sweep.py":
         import pandas as pd
 

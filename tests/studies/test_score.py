@@ -320,3 +320,23 @@ def test_davis_vector_volume_and_tracks_are_scored(tmp_path):
     t = score(run, tmp_path / "tracks", out_dir=tmp_path / "t")
     assert t["kind"] == "tracks" and t["yield"] == pytest.approx(1.0) and t["ghost_fraction"] == pytest.approx(0.0)
     assert t["position_error_mm"] < 0.01 and t["correct_track_fraction"] == pytest.approx(1.0)
+
+
+def test_openlpt_results_folder_is_scored(tmp_path):
+    """OpenLPT's track CSVs (results/ConvergeTrack/LongTrack*.csv: TrackID, FrameID, WorldX, WorldY,
+    WorldZ, ...), frames counted from the export's first image: --first-frame maps them."""
+    run, pos, _ = _fake_run(tmp_path / "run", frames=8, n=50)
+    d = tmp_path / "lpt" / "results" / "ConvergeTrack"
+    d.mkdir(parents=True)
+    rows = ["TrackID,FrameID,WorldX,WorldY,WorldZ,Error"]
+    for i in range(40):  # 40 of the 50 particles, frames 2..7 of the run as OpenLPT's 0..5
+        rows += [f"{i},{k},{pos[k + 2, i, 0]:.6f},{pos[k + 2, i, 1]:.6f},{pos[k + 2, i, 2]:.6f},0" for k in range(6)]
+    (d / "LongTrack0.csv").write_text("\n".join(rows) + "\n")
+    m = score(run, tmp_path / "lpt", first_frame=2, out_dir=tmp_path / "s")
+    assert m["kind"] == "tracks" and m["format"] == "openlpt" and m["frames"] == [2, 3, 4, 5, 6, 7]
+    inside = np.all((pos[2:] >= [-5, -5, -2]) & (pos[2:] <= [5, 5, 2]), axis=2)  # (frames, particles) in the box
+    assert m["yield"] == pytest.approx(inside[:, :40].sum() / inside.sum(), rel=1e-12)
+    assert m["ghost_fraction"] == pytest.approx(0.0)
+    assert m["position_error_mm"] < 1e-5
+    with pytest.raises(ResultMismatch, match="--first-frame"):  # frame 0 of OpenLPT is not run frame 0
+        score(run, tmp_path / "lpt", out_dir=tmp_path / "t", radius_mm=0.1)
