@@ -712,13 +712,14 @@ def cmd_score(args) -> int:
     m = score(args.run, args.result, out_dir=args.out, what=args.what, fmt=args.format, camera=args.camera,
               frames=args.frames, window=args.window, length_unit=args.length_unit, velocity_unit=args.velocity_unit,
               flip_y=args.flip_y, plane_z_mm=args.plane_z_mm, radius_mm=args.radius_mm, first_frame=args.first_frame,
-              group=args.group, davis_frame=args.davis_frame, force=args.force)
+              group=args.group, davis_frame=args.davis_frame, reference=args.reference, force=args.force)
 
     def f(x, spec=".4g"):
         return "n/a" if x is None else (", ".join(format(v, spec) for v in x) if isinstance(x, list) else format(x, spec))
 
     if m["kind"] == "vectors-2d":
-        line = (f"{m['n_scored']} vectors on {m['camera']}: RMS error {f(m['rms_px'])} px (x, y), "
+        line = (f"{m['n_scored']} vectors on {m['camera']}: RMS error {f(m['rms_px'])} px (x, y; {m['reference']} "
+                f"reference), "
                 f"{f(m['error_outlier_fraction'], '.2%')} above {m['error_outlier_px']:g} px")
     elif m["kind"] == "vectors-3d":
         line = (f"{m['n']} vectors: RMS error {f(m['rms_vox'])} voxels (x, y, z), "
@@ -1000,6 +1001,8 @@ def main(argv=None) -> int:
                     "frame (default 0)")
     so.add_argument("--group", default=None, help="HDF5: the group holding x, y, z, u, v, w")
     so.add_argument("--davis-frame", type=_int_in(0), default=0, help="DaVis vector set: the frame to score")
+    so.add_argument("--reference", choices=["flow", "particles"], default=None, help="a 2-D field's window-averaged "
+                    "truth: the flow on the sheet (default with an analytic flow) or the true particles in each window")
     so.add_argument("--force", action="store_true", help="score a result that fails the unit / axis / frame checks "
                     "(the flags are recorded)")
     so.set_defaults(func=cmd_score)

@@ -7,18 +7,31 @@ What is scored (:func:`score`; the readers are :mod:`mitpiv.io.external`):
 
 **A 2-D vector field** (planar PIV on one camera's images, ``--camera``; default the run's
 only or first camera). The field's positions and displacements are in that camera's pixels
-(``--length-unit px``; OpenPIV's default) or in world units on the plane ``z = --plane-z-mm``
-(a calibrated planar field: DaVis in mm and m/s), which are projected through the run's exact
-camera into pixels. The reference of each vector is the *window-averaged truth*: the mean
-image displacement between the two frames (``--frames A B``, default 0 1) of the true
-particles whose frame-A image lies inside its interrogation window (a square of ``--window``
-in the field's length unit), each weighted by ``I_A I_B``, the product of its image
-intensities in the two frames (a correlation peak is the sum of such products):
-``I = d^2 x`` the laser sheet's relative irradiance at the particle (the scene's sheet
-profile; ``d`` the diameter). Windows without a true particle have no reference and are left
-out (counted). Errors in pixels: RMS per component, bias, RMS magnitude, the fraction with
-``|error| > 1 px`` (:data:`ERROR_OUTLIER`) and the universal outlier detection's ratio
-(:func:`mitpiv.analysis.uod`, threshold 2, epsilon 0.1 px, as mitpiv validates its own).
+(``--length-unit px``; OpenPIV's default) or in world units on a plane ``z = const``
+(``--plane-z-mm``, default the laser sheet's mid-plane; a calibrated planar field: DaVis in mm
+and m/s), which are projected through the run's exact camera into pixels. Each vector's
+reference is a *window-averaged truth* between the two frames (``--frames A B``, default
+0 1) over its interrogation window (a square of ``--window`` in the field's length unit),
+one of two (``--reference``):
+
+* ``flow`` (the default when the run records an analytic flow): ``4 x 4`` points spread over
+  the window traced back through the camera onto the sheet's mid-plane, advected by the flow
+  and projected again (:func:`flow_image_reference`): the averaging
+  :func:`mitpiv.analysis.velocity_error` does in 3-D, on the plane the camera images.
+* ``particles``: the image displacement of the true particles whose frame-A image lies inside
+  the window, each weighted by ``I_A I_B``, the product of its image intensities in the two
+  frames (a correlation peak is the sum of such products): ``I = d^2 x`` the laser sheet's
+  relative irradiance at the particle (the scene's sheet profile; ``d`` the diameter);
+  :func:`image_plane_truth`. What the correlation could see, out-of-plane motion and the
+  sheet profile included, but a sample of the few particles of a small window: where the
+  displacement varies across a window it scatters by about ``dU / sqrt(12 N)``. Windows
+  without a true particle have no reference and are left out (counted).
+
+Both are computed; ``reference_spread_px``, the RMS difference between them, is the floor
+the particle sample puts under any comparison. Errors in pixels: RMS per component, bias, RMS
+magnitude, the fraction with ``|error| > 1 px`` (:data:`ERROR_OUTLIER`) and the universal
+outlier detection's ratio (:func:`mitpiv.analysis.uod`, threshold 2, epsilon 0.1 px, as
+mitpiv validates its own).
 
 **A 3-D vector field** (tomographic PIV): positions in mm (or m), velocities in mm/s or m/s,
 or displacements (mm, m or the run's voxels) between the frames. Scored by
@@ -49,8 +62,9 @@ Writes, in ``out_dir``: ``score.json`` (every number, the settings used and the 
 the error map and its distribution; ``particles.png``: yield and ghosts per frame and the
 position-error histogram).
 
-Hand-written here: the window-averaged image-plane truth (an integral image of the particles'
-weighted displacements; no PIV package scores against a particle truth) and the checks; the
+Hand-written here: the window-averaged image-plane references (the flow traced onto the
+sheet; an integral image of the particles' weighted displacements: no PIV package scores
+against a rendered run's truth) and the checks; the
 metrics are mitpiv's own (:mod:`mitpiv.analysis`, :mod:`mitpiv.tracking.metrics`).
 """
 
@@ -65,7 +79,7 @@ import numpy as np
 from mitpiv.errors import ConfigError, FileFormatError, MitpivError
 
 __all__ = ["score", "ResultMismatch", "MISMATCH_FACTOR", "ERROR_OUTLIER", "LENGTH_UNITS", "VELOCITY_UNITS",
-           "image_plane_truth"]
+           "image_plane_truth", "flow_image_reference"]
 
 log = logging.getLogger(__name__)
 
@@ -236,6 +250,41 @@ def image_plane_truth(centres_px, window_px, pa_px, pb_px, weights, resolution) 
     return ref, np.rint(box[3]).astype(np.int64)
 
 
+def flow_image_reference(cam, flow, centres_px, window_px, *, plane_point_mm, plane_normal, t0_s: float, dt_s: float,
+                         samples: int = 4, substeps: int = 10) -> np.ndarray:
+    """Window-averaged image displacement of an analytic flow on a plane (a 2-D field's flow
+    reference).
+
+    ``samples`` x ``samples`` points spread uniformly over each square window (side
+    ``window_px``, centres ``centres_px`` (M, 2), pixel ``i`` spanning ``[i, i + 1)``) are
+    traced back through the camera (``pixel_to_ray``) onto the plane through
+    ``plane_point_mm`` with normal ``plane_normal`` (the laser sheet's mid-plane), advected by
+    ``flow`` from ``t0_s`` over ``dt_s`` (RK4, ``substeps``) and projected again; the mean
+    image displacement per window, (M, 2) [px], is returned (NaN where a ray misses the
+    plane). The same averaging as :func:`mitpiv.analysis.velocity_error` in 3-D, on the plane
+    the camera images.
+    """
+    from mitpiv.physics.advection import advect
+
+    c = np.asarray(centres_px, float)
+    q = ((np.arange(samples) + 0.5) / samples - 0.5) * float(window_px)
+    ox, oy = np.meshgrid(q, q)
+    uv = c[:, None, :] + np.stack([ox.ravel(), oy.ravel()], axis=-1)[None]  # (M, S, 2)
+    o, d = cam.pixel_to_ray(uv)
+    n = np.asarray(plane_normal, float)
+    n = n / np.linalg.norm(n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((np.asarray(plane_point_mm, float) - o) @ n) / (d @ n)
+    world = o + d * np.where(t > 0, t, np.nan)[..., None]
+    flat = world.reshape(-1, 3)
+    ok = np.all(np.isfinite(flat), axis=1)
+    disp = np.full((len(flat), 2), np.nan)
+    if ok.any():
+        moved = advect(flat[ok], flow, dt_s=dt_s, t0_s=t0_s, substeps=substeps)
+        disp[ok] = cam.project(moved) - cam.project(flat[ok])
+    return disp.reshape(uv.shape).mean(axis=1)
+
+
 def _lattice(points: np.ndarray, rel_tol: float = 1e-4):
     """The rectilinear lattice of ``points`` (N, D): (axes, index (N, D)) or None."""
     axes, index = [], []
@@ -348,7 +397,19 @@ def _to_px(run: _Run, cam, ev, lu: str, vu: str, dt: float, plane_z: float):
     return a, cam.project(world + d_world) - a
 
 
-def _score_2d(run: _Run, ev, *, camera, frames, window, lu, vu, plane_z_mm, force) -> tuple[dict, dict]:
+def _sheet_plane(run: _Run, plane_z_mm):
+    """The plane a 2-D field lies on: z = ``plane_z_mm`` when given, else the run's one laser
+    sheet's mid-plane, else z = the volume's middle. Returns (point, normal, what)."""
+    if plane_z_mm is not None:
+        return np.array([0.0, 0.0, float(plane_z_mm)]), np.array([0.0, 0.0, 1.0]), f"z = {float(plane_z_mm):g} mm"
+    if len(run.sheets) == 1:
+        s = next(iter(run.sheets.values()))
+        return np.asarray(s["origin_mm"], float), np.asarray(s["normal"], float), "the laser sheet's mid-plane"
+    z = float(0.5 * (run.lower[2] + run.upper[2]))
+    return np.array([0.0, 0.0, z]), np.array([0.0, 0.0, 1.0]), f"z = {z:g} mm (the volume's middle)"
+
+
+def _score_2d(run: _Run, ev, *, camera, frames, window, lu, vu, plane_z_mm, reference, force) -> tuple[dict, dict]:
     cam_id, cam = _camera(run, camera)
     a, b = _frames(run, frames)
     dt = float(run.times[b] - run.times[a])
@@ -357,7 +418,11 @@ def _score_2d(run: _Run, ev, *, camera, frames, window, lu, vu, plane_z_mm, forc
     if vu is None:
         raise ConfigError(f"score: {ev.source!r} does not state its vector unit; give --velocity-unit (mm/s, m/s, mm, "
                           "m, px).")
-    plane_z = float(0.5 * (run.lower[2] + run.upper[2])) if plane_z_mm is None else float(plane_z_mm)
+    plane_pt, plane_n, plane_what = _sheet_plane(run, plane_z_mm)
+    plane_z = float(plane_pt[2])
+    if lu != "px" and abs(abs(plane_n[2]) - 1.0) > 1e-9:
+        raise ConfigError(f"score: a 2-D field in {lu!r} is read on a plane z = const; the run's sheet is tilted "
+                          f"(normal {plane_n.tolist()}): give --plane-z-mm, or the field in px.")
     pts, disp = _to_px(run, cam, ev, lu, vu, dt, plane_z)
     Wd, Ht = cam.resolution
     if window is None:
@@ -378,7 +443,21 @@ def _score_2d(run: _Run, ev, *, camera, frames, window, lu, vu, plane_z_mm, forc
     pa, pb = cam.project(pa_w), cam.project(pb_w)
     vis = cam.visible(pa_w) & cam.visible(pb_w)
     w = _intensity(run, pa_w) * _intensity(run, pb_w) * vis
-    ref, n_in = image_plane_truth(pts, win_px, pa, pb, w, cam.resolution)
+    ref_p, n_in = image_plane_truth(pts, win_px, pa, pb, w, cam.resolution)
+    has_flow = bool(run.truth.get("flow"))
+    if reference is None:
+        reference = "flow" if has_flow else "particles"
+    if reference not in ("flow", "particles"):
+        raise ConfigError(f"score: --reference {reference!r} is not 'flow' or 'particles'.")
+    ref_f = None
+    if has_flow:
+        from mitpiv.physics.flows import flow_from_dict
+
+        ref_f = flow_image_reference(cam, flow_from_dict(dict(run.truth["flow"])), pts, win_px, plane_point_mm=plane_pt,
+                                     plane_normal=plane_n, t0_s=float(run.times[a]), dt_s=dt)
+    elif reference == "flow":
+        raise FileFormatError(f"score: the run {str(run.path)!r} records no analytic flow; use --reference particles.")
+    ref = ref_f if reference == "flow" else ref_p
     inside = (pts[:, 0] >= 0) & (pts[:, 0] <= Wd) & (pts[:, 1] >= 0) & (pts[:, 1] <= Ht)
     flags = []
     if inside.mean() < 0.5:
@@ -395,7 +474,12 @@ def _score_2d(run: _Run, ev, *, camera, frames, window, lu, vu, plane_z_mm, forc
     err = np.where(use[:, None], disp - ref, np.nan)
     e = err[use]
     uod_ratio, uod_out = _uod_ratio(pts, disp, ev.valid, 1.0)
+    both = use & np.all(np.isfinite(ref_p), axis=1) & (np.all(np.isfinite(ref_f), axis=1) if ref_f is not None
+                                                         else False)
+    spread = float(np.sqrt(np.mean(np.sum((ref_p[both] - ref_f[both]) ** 2, axis=1)))) if np.any(both) else \
+        float("nan")
     m = {"kind": "vectors-2d", "camera": cam_id, "frames": [a, b], "dt_s": dt, "window_px": win_px,
+         "reference": reference, "plane": plane_what, "reference_spread_px": spread,
          "n_vectors": int(len(pts)), "n_valid": int(ev.valid.sum()), "n_scored": int(use.sum()),
          "n_without_truth": int((ev.valid & inside & ~np.all(np.isfinite(ref), axis=1)).sum()),
          "particles_per_window": float(np.mean(n_in[use])) if use.any() else float("nan"),
@@ -604,7 +688,9 @@ def _markdown(m: dict, source: str, run: Path) -> str:
     lines += ["| quantity | value |", "|---|---|"]
     order = {"vectors-2d": [("vectors scored / valid / all", lambda: f"{m['n_scored']} / {m['n_valid']} / "
                                                                        f"{m['n_vectors']}"),
+                            ("reference", lambda: f"{m['reference']} (window-averaged; on {m['plane']})"),
                             ("true particles per window (mean)", lambda: _fmt(m["particles_per_window"], ".3g")),
+                            ("RMS particles - flow reference [px]", lambda: _fmt(m["reference_spread_px"])),
                             ("RMS error x, y [px]", lambda: _fmt(m["rms_px"])),
                             ("bias x, y [px]", lambda: _fmt(m["bias_px"])),
                             ("RMS error magnitude [px]", lambda: _fmt(m["rms_magnitude_px"])),
@@ -649,8 +735,8 @@ def _plot_2d(arr: dict, m: dict, path: Path) -> None:
     ax[0].quiver(p[q, 0], p[q, 1], arr["measured_px"][q, 0], arr["measured_px"][q, 1], color="k",
                  angles="xy", scale_units="xy", scale=0.25, width=0.003)
     ax[0].set(xlim=(0, W), ylim=(H, 0), xlabel="x [px]", ylabel="y [px]", aspect="equal",
-              title=f"|error|, camera {m['camera']} (arrows: measured x4)")
-    fig.colorbar(sc, ax=ax[0], label="|measured - window-averaged truth| [px]")
+              title=f"|error| on {m['camera']}; arrows: measured x4")
+    fig.colorbar(sc, ax=ax[0], label=f"|measured - window-averaged {m['reference']} truth| [px]")
     for k, name in enumerate("xy"):
         ax[1].hist(e[use, k], bins=60, histtype="step", label=f"{name}: RMS {_fmt(m['rms_px'][k], '.3g')} px")
     ax[1].set(xlabel="error [px]", ylabel="vectors", title="error distribution")
@@ -715,7 +801,7 @@ def score(run_dir, result, *, out_dir=None, what: str | None = None, fmt: str | 
           camera: str | None = None, frames=(0, 1), window: float | None = None, length_unit: str | None = None,
           velocity_unit: str | None = None, flip_y: bool = False, plane_z_mm: float | None = None,
           radius_mm: float | None = None, first_frame: int = 0, group: str | None = None, davis_frame: int = 0,
-          force: bool = False) -> dict:
+          reference: str | None = None, force: bool = False) -> dict:
     """Score another tool's result against a run's truth (see the module notes).
 
     Parameters
@@ -733,10 +819,13 @@ def score(run_dir, result, *, out_dir=None, what: str | None = None, fmt: str | 
         (:data:`LENGTH_UNITS`, :data:`VELOCITY_UNITS`); given, they override the file's.
     flip_y : the field's y axis points up (OpenPIV's ``transform_coordinates``): mirror y about
         the field's middle row and negate v.
-    plane_z_mm : the world plane a 2-D field in mm lies on (default the volume's middle).
+    plane_z_mm : the world plane z a 2-D field lies on (default the run's laser sheet's
+        mid-plane, else the volume's middle).
     radius_mm : the particle match radius (default the run's own).
     first_frame : the run frame of the result's first frame (particles and tracks).
     group : the HDF5 group of the datasets; davis_frame : the frame of a DaVis vector set.
+    reference : a 2-D field's reference, ``"flow"`` (default when the run records an analytic
+        flow) or ``"particles"`` (module notes).
     force : score a result that is flagged as not describing the truth (the flags are kept).
 
     Returns
@@ -774,7 +863,7 @@ def score(run_dir, result, *, out_dir=None, what: str | None = None, fmt: str | 
             flu, fvu = flu or "px", fvu or ("px" if (flu or "px") == "px" else None)
         if ev.dims == 2 and ev.components == 2:
             m, arr = _score_2d(run, ev, camera=camera, frames=frames, window=window, lu=flu, vu=fvu,
-                               plane_z_mm=plane_z_mm, force=force)
+                               plane_z_mm=plane_z_mm, reference=reference, force=force)
         elif ev.dims == 3 and ev.components == 3:
             m, arr = _score_3d(run, ev, frames=frames, window=window, lu=flu, vu=fvu, force=force)
         else:

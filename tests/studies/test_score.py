@@ -83,7 +83,7 @@ def test_openpiv_round_trip_is_scored_as_computed_independently(planar, capsys):
 
     out = planar["dir"] / "score"
     assert main(["-q", "score", str(planar["run"]), str(planar["dir"] / "field.txt"), "--window", str(WIN),
-                 "--out", str(out)]) == 0
+                 "--reference", "particles", "--out", str(out)]) == 0
     assert "vectors on cam0: RMS error" in capsys.readouterr().out
     m = json.loads((out / "score.json").read_text())
     ref = _truth_by_windows(planar["run"], planar["x"], planar["y"], WIN)
@@ -99,6 +99,45 @@ def test_openpiv_round_trip_is_scored_as_computed_independently(planar, capsys):
     assert max(m["rms_px"]) < 0.35
     assert m["flags"] == [] and m["particles_per_window"] > 5
     assert (out / "score.md").read_text().count("|") > 10 and (out / "velocity_error.png").stat().st_size > 10_000
+    # against the flow reference (the default): the same vectors, the sample noise of the
+    # particle reference gone; the two references differ by the reported spread
+    f = score(planar["run"], planar["dir"] / "field.txt", window=WIN, out_dir=planar["dir"] / "score_flow")
+    assert f["reference"] == "flow" and f["plane"] == "the laser sheet's mid-plane"
+    assert 0.0 < f["reference_spread_px"] < 0.3 and f["n_scored"] >= m["n_scored"]
+    assert max(f["rms_px"]) < 0.35
+
+
+def test_flow_reference_against_closed_form(planar):
+    """A uniform flow on the sheet seen by the camera normal to it (15 px per mm at the
+    sheet, image y down): every window's reference is the pinhole's image of the world
+    displacement, written here in closed form."""
+    from mitpiv.io import camera_from_metadata, read_exr
+    from mitpiv.physics.flows import LambOseen, Uniform
+    from mitpiv.studies.score import flow_image_reference
+
+    cam = camera_from_metadata(read_exr(planar["run"] / "render" / "cam0_frame000.exr")[1])
+    c = np.stack([planar["x"].ravel(), planar["y"].ravel()], axis=1)
+    v = np.array([120.0, -40.0, 30.0])  # mm/s; w moves particles within the plane's normal only
+    ref = flow_image_reference(cam, Uniform(v), c, 32, plane_point_mm=[0, 0, 0], plane_normal=[0, 0, 1], t0_s=0.0,
+                               dt_s=0.001)
+    # the pinhole at height D = 400 mm, f = 6000 px: u = cx + f X / (D - Z), v = cy - f Y / (D - Z); the
+    # z motion (0.03 mm) changes the scale by 7.5e-5
+    (cx, cy), f, D = cam.principal_point_px, 6000.0, 400.0
+    assert cam.focal_px == f and cam.position_mm[2] == pytest.approx(D)
+    world0 = np.column_stack([(c[:, 0] - cx) * D / f, -(c[:, 1] - cy) * D / f, np.zeros(len(c))])
+    world1 = world0 + v * 0.001
+    s1 = f / (D - world1[:, 2])
+    expect = np.column_stack([world1[:, 0] * s1 - world0[:, 0] * f / D, -(world1[:, 1] * s1 - world0[:, 1] * f / D)])
+    np.testing.assert_allclose(ref, expect, atol=1e-9)
+    # solid-body rotation in a Lamb-Oseen core is linear in position: the 4 x 4 average is the value
+    # at the window centre to the rotation's second order (theta^2 / 2 of the 0.12 rad step)
+    lo = LambOseen(circulation_mm2_s=12000.0, core_radius_mm=4.0)
+    centre = flow_image_reference(cam, lo, np.array([[cx + 15.0, cy]]), 1e-6, plane_point_mm=[0, 0, 0],
+                                  plane_normal=[0, 0, 1], t0_s=0.0, dt_s=0.001)
+    r = 1.0  # mm from the axis
+    omega = 12000.0 / (2 * np.pi * r**2) * (1 - np.exp(-(r**2) / 16.0))  # rad/s
+    th = omega * 0.001
+    np.testing.assert_allclose(centre[0], [15 * r * (np.cos(th) - 1), -15 * r * np.sin(th)], atol=1e-6)
 
 
 def test_y_up_field_is_refused_and_flip_y_scores_it(planar, tmp_path):
