@@ -14,9 +14,10 @@ The same from the command line (any PIV code in the middle)::
 
 OpenPIV's multi-pass window deformation (``openpiv.windef``) is run twice: 64 -> 32 px and
 64 -> 32 -> 16 px windows (50 % overlap), each field saved with ``openpiv.tools.save``.
-The two are scored against the window-averaged truth of their final window (the image
-displacement of the true particles inside each window, weighted by their image
-intensities). Then the 16 px field is saved again after OpenPIV's ``transform_coordinates``
+The two are scored against the window-averaged truth of their final window (the vortex's
+flow averaged over each window on the laser sheet's mid-plane, in the camera's pixels;
+``reference_spread_px`` in score.json says how far the true particles inside the windows
+scatter about it). Then the 16 px field is saved again after OpenPIV's ``transform_coordinates``
 (y pointing up), which ``mitpiv score`` refuses and ``--flip-y`` scores.
 
 Last, the run goes out as a LaVision DaVis set (``mitpiv export --davis``: images with
