@@ -786,11 +786,22 @@ def _what(path: Path, fmt: str | None) -> str:
         return "tracks"
     if fmt is None:
         try:
-            f = track_format(path)
-            return "vectors" if f == "davis" and path.suffix.lower() == ".vc7" else "tracks"
+            fmt = track_format(path)
         except ConfigError:
             vector_format(path)
             return "vectors"
+        if fmt != "davis":
+            return "tracks"
+    if fmt == "davis":  # a .set or set folder: lvpyio says whether it is a particle field
+        from mitpiv.io.davis import _read_set
+
+        try:
+            _read_set(path, "score")
+        except FileFormatError as e:
+            if "particle field" in str(e):
+                return "tracks"
+            raise
+        return "vectors"
     if fmt not in VECTOR_FORMATS + TRACK_FORMATS:
         raise ConfigError(f"score: --format {fmt!r} is not one of {sorted(set(VECTOR_FORMATS + TRACK_FORMATS))}.")
     raise ConfigError(f"score: cannot tell whether {str(path)!r} holds vectors or particles; give --what vectors or "
