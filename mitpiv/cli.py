@@ -994,8 +994,8 @@ def main(argv=None) -> int:
                     "px, vox, mm, m or velocities px/s, mm/s, m/s")
     so.add_argument("--flip-y", action="store_true", help="the field's y axis points up (OpenPIV's "
                     "transform_coordinates): mirror y and negate v")
-    so.add_argument("--plane-z-mm", type=float, default=None, help="a 2-D field in mm: the world plane z it lies on "
-                    "(default the volume's middle)")
+    so.add_argument("--plane-z-mm", type=float, default=None, help="a 2-D field: the world plane z it lies on "
+                    "(default the laser sheet's mid-plane, else the volume's middle)")
     so.add_argument("--radius-mm", type=float, default=None, help="particles: the match radius (default the run's own)")
     so.add_argument("--first-frame", type=_int_in(0), default=0, help="particles: the run frame of the result's first "
                     "frame (default 0)")
