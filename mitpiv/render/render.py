@@ -210,7 +210,7 @@ def _truth_info(xml_path: Path, params: dict) -> tuple[str | None, np.ndarray | 
 
 
 def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0, progress=None,
-                 sensors=None, search_dirs=()) -> list[Path]:
+                 sensors=None, search_dirs=(), source_file=None) -> list[Path]:
     """Render every sensor of a scene XML for each frame.
 
     Writes ``{sensor_id}_frame{frame:03d}.exr`` (float32, metadata in the header) and a
@@ -247,6 +247,10 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
         scene file's own folder (:func:`~mitpiv.render.scene.load_scene`): an experiment
         renders a copy of its XML placed beside its particle files, and the files the XML
         names (a calibration) are found beside the original.
+    source_file : path, optional
+        The scene file the metadata's ``scene_file`` names (default ``scene``): an
+        experiment renders a copy of its XML in a stage's temporary folder and records the
+        XML it was given.
 
     Returns
     -------
@@ -308,7 +312,7 @@ def render_scene(scene, *, out_dir, frames=(0, 1), params=None, spp=None, seed=0
                     "mitsuba_version": mi.__version__,
                     "drjit_version": dr.__version__,
                     "variant": mi.variant(),
-                    "scene_file": str(xml_path.resolve()),
+                    "scene_file": str(Path(source_file if source_file is not None else xml_path).resolve()),
                     "scene_sha256": sha,
                     "parameters": params,
                     "seed": seed,

@@ -392,3 +392,17 @@ voxel_mm = 0.1
         load_experiment(exp, {"seeding.count": 10})
     with pytest.raises(ConfigError, match="box_min_mm and box_max_mm are required"):
         load_experiment(exp, {"seeding.file": None, "seeding.count": 10})
+
+
+def test_images_name_the_scene_the_experiment_gave(run):
+    """The render stage renders a copy of the scene in its temporary folder; the images'
+    metadata names the experiment's own XML (a path that exists after the run), not the copy."""
+    import tomllib
+
+    from mitpiv.io import read_exr_metadata
+
+    exp, run_dir, _ = run
+    xml = (exp.parent / tomllib.loads(exp.read_text())["scene"]["xml"]).resolve()
+    for f in sorted((run_dir / "render").glob("*.exr")):
+        md = read_exr_metadata(f)
+        assert md["scene_file"] == str(xml) and Path(md["scene_file"]).is_file()

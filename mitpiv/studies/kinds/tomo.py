@@ -438,7 +438,7 @@ def stage_render(ctx: StageContext) -> dict:
             links.append(dst)
         files = render_scene(xml, out_dir=ctx.out, frames=FRAMES, params=cfg.scene.params, spp=cfg.render.spp,
                              seed=cfg.seed, progress=ctx.progress, sensors=cfg.render.sensors,
-                             search_dirs=[Path(cfg.scene.xml).parent])
+                             search_dirs=[Path(cfg.scene.xml).parent], source_file=cfg.scene.xml)
     finally:
         for f in links:
             f.unlink(missing_ok=True)

@@ -340,12 +340,12 @@ def stage_field(ctx: StageContext) -> dict:
 
 
 def render_chunk(xml: str, frames: list[int], params: dict, spp, seed: int, sensors, out_dir: str,
-                 search_dirs=()) -> list[str]:
+                 search_dirs=(), source_file=None) -> list[str]:
     """Render one chunk of frames (a module-level function: it runs in Dask workers too)."""
     from mitpiv.render.render import render_scene
 
     files = render_scene(xml, out_dir=out_dir, frames=frames, params=params, spp=spp, seed=seed, sensors=sensors,
-                         search_dirs=search_dirs)
+                         search_dirs=search_dirs, source_file=source_file)
     (Path(out_dir) / "render.json").unlink(missing_ok=True)  # one index per chunk: the stage writes its own
     return [f.name for f in files]
 
@@ -364,7 +364,8 @@ def stage_render(ctx: StageContext) -> dict:
     r = cfg.render
     chunks = [list(range(i, min(i + r.chunk_frames, n))) for i in range(0, n, r.chunk_frames)]
     # the files the XML names (a calibration) are found beside the original
-    args = (str(xml), dict(cfg.scene.params), r.spp, cfg.seed, r.sensors, str(ctx.out), [str(Path(cfg.scene.xml).parent)])
+    args = (str(xml), dict(cfg.scene.params), r.spp, cfg.seed, r.sensors, str(ctx.out), [str(Path(cfg.scene.xml).parent)],
+            str(cfg.scene.xml))
     names: list[str] = []
     try:
         for k in range(n):
