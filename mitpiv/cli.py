@@ -677,7 +677,8 @@ def cmd_export(args) -> int:
     if args.davis:
         from mitpiv.studies.export_davis import export_davis
 
-        m = export_davis(args.run, args.davis, progress=_progress(args))
+        m = export_davis(args.run, args.davis, progress=_progress(args), n_planes=max(args.plate_planes, 1),
+                         spp=args.plate_spp, calibration=args.plate_planes > 0)
         cal = m.get("calibration")
         print(f"davis: {len(m['sensors'])} cameras x {len(m['times_s'])} frames ({m['source']} images, "
               f"{m['images']['dtype']})" + (f", calibration plate at {len(cal['z_positions_mm'])} z positions"
@@ -969,6 +970,10 @@ def main(argv=None) -> int:
     ex.add_argument("--openptv", default=None, metavar="DIR", help="OpenPTV inputs (parameters, .ori/.addpar, TIFFs)")
     ex.add_argument("--davis", default=None, metavar="DIR", help="LaVision DaVis: image set with frame times, "
                     "calibration-plate image set, truth particle field (lvpyio)")
+    ex.add_argument("--plate-planes", type=_int_in(0), default=5, metavar="N", help="--davis: calibration-plate "
+                    "positions through the seeding box's depth (default 5; 0: no calibration set)")
+    ex.add_argument("--plate-spp", type=_int_in(1), default=4, metavar="N", help="--davis: samples per (film) pixel "
+                    "of the plate renders (default 4; their cost: mitpiv.studies.export_davis)")
     ex.add_argument("--tiff", default=None, metavar="DIR", help="16-bit TIFF frames of every camera for any 2-D PIV "
                     "code (<sensor>_<frame>.tif; the camera counts as they are)")
     ex.add_argument("--undistort", action="store_true", help="--openlpt: resample distorted cameras' frames to "

@@ -358,17 +358,23 @@ def test_export_keeps_the_sensor_stage_counts(davis_run, tmp_path):
     assert not (tmp_path / "dv" / "Truth.set").exists()
 
 
-def test_export_command_line(davis_run, tmp_path, monkeypatch, capsys):
+def test_export_command_line(davis_run, tmp_path, capsys):
+    import lvpyio
+
     from mitpiv import cli
-    from mitpiv.studies import export_davis as ed
 
     run = davis_run[0]
-    real = ed.export_davis
-    monkeypatch.setattr(ed, "export_davis", lambda r, o, **k: real(r, o, calibration=False, **k))
-    assert cli.main(["export", str(run), "--davis", str(tmp_path / "dv")]) == 0
+    assert cli.main(["export", str(run), "--davis", str(tmp_path / "dv"), "--plate-planes", "0"]) == 0
     line = capsys.readouterr().out.strip().splitlines()[-1]
     assert line.startswith("davis: 2 cameras x 2 frames (render images, uint16)") and line.endswith(str(tmp_path / "dv"))
     assert (tmp_path / "dv" / "Images.set").is_file() and not (tmp_path / "dv" / "Calibration.set").exists()
+    # one plate position at 1 sample per film pixel: one calibration buffer, the settings recorded
+    assert cli.main(["-q", "export", str(run), "--davis", str(tmp_path / "dv1"), "--plate-planes", "1",
+                     "--plate-spp", "1"]) == 0
+    assert "calibration plate at 1 z positions" in capsys.readouterr().out
+    assert len(lvpyio.read_set(str(tmp_path / "dv1" / "Calibration.set"))) == 1
+    m = json.loads((tmp_path / "dv1" / "mitpiv_export.json").read_text())
+    assert m["calibration"]["spp"] == 1 and len(m["calibration"]["z_positions_mm"]) == 1
     (tmp_path / "f").write_text("")
     assert cli.main(["export", str(run), "--davis", str(tmp_path / "f")]) != 0
     assert "--davis" in capsys.readouterr().err
