@@ -176,7 +176,11 @@ def _write_truth(tmp: Path, run: Path) -> dict | None:
     if pos.shape[1] < 2:
         return None
     ok = np.all(np.isfinite(pos), axis=2)
-    keep = np.array([(idx := np.flatnonzero(r)).size >= 2 and idx[-1] - idx[0] + 1 == idx.size for r in ok])
+    # tracks of at least 2 frames without a gap: first to last present frame all present
+    n = ok.sum(axis=1)
+    first = np.argmax(ok, axis=1)
+    last = ok.shape[1] - 1 - np.argmax(ok[:, ::-1], axis=1)
+    keep = (n >= 2) & (last - first + 1 == n)
     vel = tr["velocities_mm_s"]
     vel = np.transpose(np.asarray(vel, float), (1, 0, 2))[keep] if vel is not None and np.ndim(vel) == 3 else None
     lv_dir = tmp / ".truth"
