@@ -29,6 +29,27 @@ Steps
    particles (intensity below ``min_intensity`` times the median) and duplicates. A
    candidate from a reduced set must be hidden in the left-out camera (its raw image is
    above the threshold there) or fall off that camera's sensor; else it is a ghost.
+5. Ghost screens after each loop's shake (issue 51; Wieneke 2013, Jahn et al. 2021):
+   *image support*: in every camera that sees it, a particle's own intensity must be
+   supported by its augmented residual (the least-squares intensity of residual plus its
+   own image on its 3 x 3 core, relative to the camera's median), else its light there
+   belongs to other particles and it is a ghost; *weak particles*: below
+   ``weak_intensity`` times the mean intensity of the particles established by earlier
+   loops, when some camera also supports them below ``weak_support`` (a dim true particle,
+   a small one of a polydisperse seeding, owns its light in every view); *camera gain*:
+   the OTF's peak per camera is rescaled by the median support, so that a camera brighter
+   or dimmer than the OTF says (Mie scattering differs per view; a Gaussian fitted to a
+   diffraction-limited image misjudges its peak) leaves no part of every particle in its
+   residual. The detection threshold takes its noise from the
+   darkest quarter of the pixels (:func:`auto_threshold` ``noise="background"``): in a
+   dense image the spread of all pixels is particle light. All-camera loops continue past
+   ``outer_loops`` (to ``max_outer_loops``) while a loop still triangulates new candidates
+   (more than ``converged`` times the particle count): each particle found frees the light
+   of its neighbours, and dense frames need 10-20 loops. The literature's tight
+   triangulation tolerance first (``tolerance_start``) and one candidate per 2D peak
+   (``unique_peaks``) are offered but off: on rendered LPT images they lowered the yield
+   (a particle placed alone takes the light of its unresolved neighbours, which then never
+   show as peaks), see docs/guide.md.
 
 Memory and time are linear in the particle count: KD-trees and sparse neighbour lists
 (SciPy) do the searches, chunks of particles bound the stamp arrays, and the shake costs
@@ -87,15 +108,29 @@ def mm_per_px(cameras, point_mm) -> float:
 
 
 # ---------------------------------------------------------------------- peaks
-def auto_threshold(image) -> float:
+def auto_threshold(image, *, noise: str = "all") -> float:
     """A detection threshold for ``image``: the larger of 5 robust noise standard
-    deviations (median absolute deviation of the pixels around the median) and 5 % of the
-    99.9th percentile (the particle peaks)."""
+    deviations above the median and 5 % of the 99.9th percentile (the particle peaks).
+
+    ``noise``: ``"all"``, the median and the median absolute deviation of all pixels;
+    ``"background"``, the lower of that level and the one from the darkest quarter of the
+    pixels taken as Gaussian noise (standard deviation ``(q25 - q5) / 0.97``, median
+    ``q25 + 0.674`` of it): in a dense image the particles' own light fills the median and
+    the spread of all pixels (at 0.1 particles per pixel, 5 deviations above the median
+    reach most of a particle's peak); in a residual image the darkest pixels are misfit."""
     a = np.asarray(image, dtype=np.float64)
+    if noise not in ("all", "background"):
+        raise ConfigError(f"auto_threshold: 'noise' must be 'all' or 'background', got {noise!r}.")
     med = np.median(a)
-    sigma = 1.4826 * np.median(np.abs(a - med))
+    level = med + 5 * 1.4826 * np.median(np.abs(a - med))
+    if noise == "background":
+        q5, q25 = np.percentile(a, [5, 25])
+        sigma = (q25 - q5) / 0.97
+        # the lower of the two: a residual image (particles subtracted) has its darkest
+        # pixels in the model's misfit, not in noise, and there all pixels tell better
+        level = min(level, q25 + 0.674 * sigma + 5 * sigma)
     hi = np.percentile(a, 99.9)
-    return float(max(med + 5 * sigma, 0.05 * hi, np.finfo(float).tiny))
+    return float(max(level, 0.05 * hi, np.finfo(float).tiny))
 
 
 def detect_peaks(image, *, threshold: float | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -351,13 +386,16 @@ class IPRResult:
     """Particles reconstructed by :func:`ipr`.
 
     positions_mm : (N, 3); intensities : (N,); residuals : per-camera residual images;
-    history : per outer loop, a dict (cameras used, peaks, candidates, particles kept).
+    history : per outer loop, a dict (cameras used, peaks, candidates, particles kept,
+    the camera gains so far); camera_gain : (n_cameras,) the factors IPR applied to the
+    OTF's peak per camera (``ipr(camera_gain=True)``; ones when off).
     """
 
     positions_mm: np.ndarray
     intensities: np.ndarray
     residuals: list = field(repr=False)
     history: list = field(default_factory=list)
+    camera_gain: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.positions_mm.shape[0])
@@ -382,10 +420,115 @@ def _prune(p, e, lo, hi, min_intensity, dup_mm):
     return p, e
 
 
+def _unique_peaks(ids, err, use):
+    """Candidates that claim each 2D peak at most once: greedy by triangulation error
+    (the best-matching candidate of a peak takes it; a candidate is kept when it is the
+    best remaining one for every peak it uses). Vectorised rounds of that rule reach the
+    sequential greedy result. Returns a boolean mask over the candidates."""
+    n = ids.shape[0]
+    keep = np.zeros(n, bool)
+    if n == 0:
+        return keep
+    rank = np.empty(n, np.int64)
+    rank[np.argsort(err, kind="stable")] = np.arange(n)
+    active = np.ones(n, bool)
+    big = np.iinfo(np.int64).max
+    for _ in range(64):
+        if not active.any():
+            break
+        win = active.copy()
+        for k in use:
+            best = np.full(int(ids[:, k].max()) + 1, big)
+            np.minimum.at(best, ids[active, k], rank[active])
+            win &= best[ids[:, k]] == rank
+        keep |= win
+        taken = [np.zeros(int(ids[:, k].max()) + 1, bool) for k in use]
+        for t, k in zip(taken, use, strict=True):
+            t[ids[win, k]] = True
+        lost = np.zeros(n, bool)
+        for t, k in zip(taken, use, strict=True):
+            lost |= t[ids[:, k]]
+        active &= ~lost
+    return keep
+
+
+def _support(res, cameras, otf, p, e, *, radius: int = 1):
+    """Per camera, the image's support of each particle: the intensity that camera alone
+    gives it (least squares of the augmented residual, the residual plus the particle's
+    own image, on the particle's (2 radius + 1)^2 core) over its intensity. (K, N), NaN
+    where the particle is off the camera's sensor or has no intensity."""
+    from mitpiv.tracking.otf import stamps
+
+    out = np.full((len(cameras), p.shape[0]), np.nan)
+    if p.shape[0] == 0:
+        return out
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for k, cam in enumerate(cameras):
+            on = np.flatnonzero(cam.visible(p) & (e > 0))
+            if on.size == 0:
+                continue
+            a, b, c, pk = otf.params(k, p[on])
+            cols, rows, g = stamps(cam.project(p[on]), a, b, c, pk, radius)
+            h, w = res[k].shape
+            inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
+            r = np.where(inside, res[k][np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)], 0.0)
+            g = np.where(inside, g, 0.0)
+            gg = (g * g).sum(axis=(1, 2))
+            ok = gg > 0
+            out[k, on[ok]] = 1.0 + (r * g).sum(axis=(1, 2))[ok] / (e[on[ok]] * gg[ok])
+    return out
+
+
+def _camera_gain(res, cameras, otf, p, e):
+    """Per camera, the median support (:func:`_support`) of the particles, normalised to a
+    geometric mean of 1 (cameras with no estimate: 1)."""
+    s = _support(res, cameras, otf, p, e)
+    g = np.ones(len(cameras))
+    for k in range(len(cameras)):
+        v = s[k][np.isfinite(s[k])]
+        if v.size >= 10 and np.median(v) > 0:
+            g[k] = np.median(v)
+    g = np.clip(g, 0.25, 4.0)
+    return g / np.exp(np.mean(np.log(g)))
+
+
+def _screen(res, cameras, otf, p, e, *, support, weak_intensity, established, weak_support=np.inf):
+    """Ghost screens of one loop (module notes): particles whose image is unsupported in
+    some camera (support below ``support``) and particles weaker than ``weak_intensity``
+    times the mean intensity of the established ones (those kept by earlier loops; all
+    particles in the first loop) whose support in some camera is below ``weak_support``
+    (a dim true particle owns its light in every view). Returns a mask."""
+    keep = np.ones(p.shape[0], bool)
+    if p.shape[0] == 0:
+        return keep
+    if support or (weak_intensity and np.isfinite(weak_support)):
+        s = _support(res, cameras, otf, p, e)
+        # relative to the camera's typical support: the OTF's peak per camera is fitted on a
+        # wider window than the core and the particle images are not exact Gaussians
+        ref = np.ones((s.shape[0], 1))
+        for k in range(s.shape[0]):  # cameras: the median of those that see some particle
+            v = s[k][np.isfinite(s[k])]
+            if v.size and np.median(v) > 0:
+                ref[k] = np.median(v)
+        smin = np.nanmin(np.where(np.isfinite(s), s / ref, np.inf), axis=0)
+    else:
+        smin = np.full(p.shape[0], -np.inf)
+    if support:
+        keep &= ~(smin < support)
+    if weak_intensity:
+        ref_set = established if established.any() else np.ones_like(keep)
+        ref = np.mean(e[ref_set & keep]) if np.any(ref_set & keep) else np.mean(e[ref_set])
+        keep &= (e >= weak_intensity * ref) | ~(smin < weak_support)
+    return keep
+
+
 def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolerance_px: float = 1.0,
         outer_loops: int = 4, reduced_loops: int = 1, shake_iterations: int = 3, shake_step_px: float = 0.5,
         final_iterations: int = 8, min_intensity: float = 0.1, duplicate_px: float = 1.0, initial=None,
-        reduced_tolerance: float = 0.5, calibration_error_px: float | None = None, progress=None) -> IPRResult:
+        reduced_tolerance: float = 0.5, calibration_error_px: float | None = None, tolerance_start: float = 1.0,
+        unique_peaks: bool = False, weak_intensity: float = 0.25, support: float = 0.5, camera_gain: bool = True,
+        final_screen: bool = True, max_outer_loops: int = 16, converged: float = 0.02, weak_support: float = 0.8,
+        progress=None) -> IPRResult:
     """Iterative particle reconstruction of one frame (Wieneke 2013).
 
     Parameters
@@ -395,7 +538,8 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
     otf : particle image model (:func:`~mitpiv.tracking.otf.calibrate_otf`).
     lower_mm, upper_mm : measurement box [mm].
     threshold : peak detection threshold (one value or one per camera); default
-        :func:`auto_threshold` of each input image (kept for every loop).
+        :func:`auto_threshold` of each input image with the background's noise
+        (``noise="background"``), kept for every loop.
     tolerance_px : allowed triangulation error [px]; must exceed the calibration's
         reprojection error.
     outer_loops : loops with all cameras; reduced_loops : further loops with every set of
@@ -411,6 +555,37 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
         tolerance cubed for four cameras, squared for three).
     calibration_error_px : the calibration's reprojection error [px], when known; it must
         be below ``tolerance_px`` (else :class:`ConfigError`).
+    tolerance_start : the first all-camera loop triangulates within this fraction of
+        ``tolerance_px``; the tolerance grows linearly to ``tolerance_px`` by the last
+        all-camera loop (the best-matching candidates first: ghosts rarely match tightly,
+        and each true particle found first takes its light out of the residual). 1: every
+        loop at ``tolerance_px``.
+    unique_peaks : each 2D peak goes to at most one candidate per loop, the one with the
+        smallest triangulation error (a peak left over is found again in the residual of the
+        next loop when two particles share it).
+    weak_intensity : after each loop's shake, particles below this fraction of the mean
+        intensity of the established particles (kept by earlier loops) are removed when their
+        support (see ``support``) in some camera is below ``weak_support`` (a dim true particle
+        owns its light in every view; ``inf``: every weak particle) (0: off;
+        ``min_intensity`` against the median still applies).
+    support : after each loop's shake, a particle is removed when some camera that sees it
+        supports less than this fraction of its intensity: the least-squares intensity of
+        its augmented residual (residual plus its own image) on its 3 x 3 core in that
+        camera, over its intensity (a ghost's light in some view belongs to other
+        particles). 0: off.
+    camera_gain : after each loop, rescale the OTF's peak per camera by the median
+        least-squares intensity of the particles' cores in that camera over their intensity
+        (geometric mean 1: the intensity scale is kept): the relative brightness of the
+        cameras (Mie scattering and polarisation differ per view; a Gaussian fitted to a
+        non-Gaussian particle image misjudges its peak) would otherwise leave a part of every
+        particle in the residual of some cameras, where it makes peaks and ghosts.
+    final_screen : apply the ``support`` and ``weak_intensity`` screens once more after
+        the final shake.
+    max_outer_loops, converged : after the ``outer_loops`` all-camera loops, more follow
+        (up to ``max_outer_loops`` in all) while the last one triangulated more than
+        ``converged`` times the particle count in new candidates: dense images need 10-20
+        loops (each particle found frees the light of its neighbours), sparse ones stop at
+        ``outer_loops``. ``max_outer_loops <= outer_loops``: exactly ``outer_loops``.
     progress : see :mod:`mitpiv.progress`.
 
     Raises
@@ -439,7 +614,7 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
                           f"tolerance tolerance_px={tol} px; true particles would not triangulate. Recalibrate "
                           f"(volume self-calibration) or raise 'tolerance_px' above the calibration error.")
     reduced_tol = tol * check_positive("reduced_tolerance", reduced_tolerance, owner="ipr")
-    thr = threshold if threshold is not None else [auto_threshold(i) for i in imgs]
+    thr = threshold if threshold is not None else [auto_threshold(i, noise="background") for i in imgs]
     thr = list(np.broadcast_to(np.asarray(thr, dtype=np.float64), (len(imgs),)))
     scale = mm_per_px(cameras, 0.5 * (lo + hi))
     step_mm = check_positive("shake_step_px", shake_step_px, owner="ipr", unit="px") * scale
@@ -458,11 +633,16 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
                 threshold=[thr[k] for k in live], tolerance_px=tol, outer_loops=outer_loops, reduced_loops=reduced_loops,
                 shake_iterations=shake_iterations, shake_step_px=shake_step_px, final_iterations=final_iterations,
                 min_intensity=min_intensity, duplicate_px=duplicate_px, reduced_tolerance=reduced_tolerance,
-                progress=progress)
+                tolerance_start=tolerance_start, unique_peaks=unique_peaks, weak_intensity=weak_intensity,
+                support=support, camera_gain=camera_gain, final_screen=final_screen, max_outer_loops=max_outer_loops,
+                converged=converged, weak_support=weak_support, progress=progress)
         res = [imgs[k].copy() for k in range(n)]
         for j, k in enumerate(live):
             res[k] = r.residuals[j]
-        return IPRResult(r.positions_mm, r.intensities, res, [dict(h, cameras=[live[c] for c in h["cameras"]]) for h in r.history])
+        g = np.ones(n)
+        g[live] = r.camera_gain
+        return IPRResult(r.positions_mm, r.intensities, res, [dict(h, cameras=[live[c] for c in h["cameras"]]) for h in r.history],
+                         g)
     if initial is not None:
         p = np.asarray(initial[0], dtype=np.float64).reshape(-1, 3)
         e = np.array(np.broadcast_to(np.asarray(initial[1], dtype=np.float64), (p.shape[0],)))
@@ -470,16 +650,33 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
         p, e = np.zeros((0, 3)), np.zeros(0)
     res = [i - pr for i, pr in zip(imgs, project_particles(p, e, cameras, otf), strict=True)] if p.size else [i.copy() for i in imgs]
     sets = [list(range(n))] * int(outer_loops)
+    f0 = check_positive("tolerance_start", tolerance_start, owner="ipr")
+    if f0 > 1:
+        raise ConfigError(f"ipr: 'tolerance_start' is a fraction of tolerance_px in (0, 1], got {tolerance_start!r}.")
+    tols = list(tol * np.linspace(f0, 1.0, int(outer_loops))) if int(outer_loops) > 1 else [tol] * int(outer_loops)
+    for name, v in (("weak_intensity", weak_intensity), ("support", support)):
+        if not (np.isfinite(v) and 0 <= v < 1):
+            raise ConfigError(f"ipr: '{name}' must be a fraction in [0, 1), got {v!r}.")
     if n >= 3:
         subsets = [list(s) for s in combinations(range(n), n - 1)]
         sets += [s for _ in range(int(reduced_loops)) for s in subsets]
     history = []
-    pk_otf = np.array([np.median(otf.peak[k]) for k in range(n)])
+    otf_in = otf
+    gain = np.ones(n)
+    n_all = int(outer_loops)
+    if isinstance(max_outer_loops, bool) or int(max_outer_loops) != max_outer_loops or max_outer_loops < 0:
+        raise ConfigError(f"ipr: 'max_outer_loops' must be a non-negative integer, got {max_outer_loops!r}.")
+    if not (np.isfinite(converged) and converged >= 0):
+        raise ConfigError(f"ipr: 'converged' must be a fraction >= 0, got {converged!r}.")
     with bar(len(sets), desc="IPR", progress=progress) as pb:
-        for use in sets:
+        for loop, use in enumerate(sets):
             peaks = [detect_peaks(r, threshold=t) for r, t in zip(res, thr, strict=True)]
-            x, ids, _ = triangulate([q[0] for q in peaks], cameras, tolerance_px=tol if len(use) == n else reduced_tol,
-                                    lower_mm=lo, upper_mm=hi, use=use)
+            x, ids, err = triangulate([q[0] for q in peaks], cameras, lower_mm=lo, upper_mm=hi, use=use,
+                                      tolerance_px=(tols[loop] if loop < len(tols) else tol) if len(use) == n
+                                      else reduced_tol)
+            if unique_peaks and x.shape[0]:
+                u = _unique_peaks(ids, err, use)
+                x, ids = x[u], ids[u]
             if x.shape[0] and len(use) < n:
                 # a particle missed by one camera must be hidden there (behind another
                 # particle's light in the raw image) or off its sensor: else it is a ghost
@@ -499,6 +696,8 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
                     f"ipr: {[int(q[0].shape[0]) for q in peaks]} peaks in the cameras but only {n_cand} triangulate "
                     f"within tolerance_px={tol} px: the calibration does not fit the images (reprojection error above "
                     f"the tolerance?). Check the cameras, recalibrate, or raise 'tolerance_px'.")
+            n_old = p.shape[0]
+            pk_otf = np.array([np.median(otf.peak[k]) for k in range(n)])
             if x.shape[0]:
                 vals = np.stack([peaks[k][1][ids[:, k]] / pk_otf[k] for k in use], axis=1)
                 e_new = vals.mean(axis=1)
@@ -506,15 +705,32 @@ def ipr(images, cameras, otf: OTF, *, lower_mm, upper_mm, threshold=None, tolera
                 e = np.concatenate([e, e_new])
             if p.shape[0]:
                 p, e, res = shake(imgs, cameras, otf, p, e, step_mm=step_mm, iterations=shake_iterations)
-                p, e = _prune(p, e, lo, hi, min_intensity, dup_mm)
+                old = np.arange(p.shape[0]) < n_old
+                keep = _screen(res, cameras, otf, p, e, support=support, weak_intensity=weak_intensity,
+                               established=old, weak_support=weak_support)
+                p, e = _prune(p[keep], e[keep], lo, hi, min_intensity, dup_mm)
+                if camera_gain and p.shape[0] >= 20:
+                    res = [i - pr for i, pr in zip(imgs, project_particles(p, e, cameras, otf), strict=True)]
+                    gain = gain * _camera_gain(res, cameras, otf, p, e)
+                    otf = OTF(otf_in.lower_mm, otf_in.upper_mm, otf_in.a, otf_in.b, otf_in.c,
+                              otf_in.peak * gain[:, None, None, None])
                 res = [i - pr for i, pr in zip(imgs, project_particles(p, e, cameras, otf), strict=True)]
             history.append({"cameras": use, "peaks": [int(q[0].shape[0]) for q in peaks], "candidates": n_cand,
-                            "particles": int(p.shape[0])})
+                            "particles": int(p.shape[0]), "camera_gain": gain.tolist()})
             log.debug("IPR loop cameras %s: %s peaks, %d candidates, %d particles", use,
                       history[-1]["peaks"], n_cand, p.shape[0])
+            if (len(use) == n and loop == n_all - 1 and n_all < max_outer_loops
+                    and n_cand > converged * max(p.shape[0], 1)):
+                # not converged: one more all-camera loop before the reduced sets (the list
+                # iterator reads the inserted set next)
+                sets.insert(loop + 1, list(range(n)))
+                n_all += 1
             pb.update()
     if p.shape[0] and final_iterations:
         p, e, res = shake(imgs, cameras, otf, p, e, step_mm=0.2 * step_mm, iterations=final_iterations)
-        p, e = _prune(p, e, lo, hi, min_intensity, dup_mm)
+        keep = _screen(res, cameras, otf, p, e, support=support if final_screen else 0.0,
+                       weak_intensity=weak_intensity if final_screen else 0.0, established=np.ones(p.shape[0], bool),
+                       weak_support=weak_support)
+        p, e = _prune(p[keep], e[keep], lo, hi, min_intensity, dup_mm)
         res = [i - pr for i, pr in zip(imgs, project_particles(p, e, cameras, otf), strict=True)]
-    return IPRResult(p, e, res, history)
+    return IPRResult(p, e, res, history, gain)
