@@ -114,7 +114,7 @@ from mitpiv.io import camera_from_metadata, read_exr  # noqa: E402
 from mitpiv.io.davis import read_davis_images, write_davis_vectors  # noqa: E402
 from mitpiv.studies.export_davis import export_davis  # noqa: E402
 
-d = export_davis(run, out / "davis", n_planes=2 if args.small else 3)
+d = export_davis(run, out / "davis", n_planes=1 if args.small else 3, spp=1 if args.small else 4)
 back = read_davis_images(out / "davis" / "Images.set")
 print(f"DaVis set: {back['images'].shape[0]} camera x {back['images'].shape[1]} frames at "
       f"{', '.join(f'{t * 1e3:g} ms' for t in back['times_s'])}; calibration plate at "
