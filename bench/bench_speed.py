@@ -7,6 +7,9 @@ Rows (each: our time, the baseline's, the ratio, the accuracy difference):
   ``--scale`` per lateral axis (1 = the published size): ours vs the frozen pre-issue code
   path (bench/reference_mart.py) vs a plain scipy.sparse MART on the same weights (matrix
   built once; row-action updates in blocks of pixels that share no voxel, which is exact).
+  Also MART's iterations against the machine's streaming bandwidth measured in the same
+  run (a compiled parallel triad and ``np.copyto`` of 1 GiB, best of 3): the bytes an
+  iteration must move, its bytes per second and their ratio to the triad's.
 * The MLOS pass of MART's pinhole fast path: the Dr.Jit kernel (LLVM backend, float64,
   what the library runs) vs the Numba kernel per plane (its fallback), and the same kernel
   in float32, measured and not kept.
@@ -52,6 +55,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 import docblocks  # noqa: E402
+from bench_mart_bandwidth import stream_bandwidth  # noqa: E402
 from bench_reconstruct import setup  # noqa: E402
 from reference_mart import mart_reference  # noqa: E402
 
@@ -76,7 +80,8 @@ def seconds(t):
 
 def emit(stage, ours, base_name, base, accuracy, note=""):
     ratio = base / ours if ours > 0 else float("nan")
-    line = f"| {stage} | {seconds(ours)} | {base_name} | {seconds(base)} | {ratio:.1f}x | {accuracy} | {note} |"
+    shown = f"{ratio:.1f}x" if not ratio < 0.1 else f"{ratio:.2g}x"  # e.g. MART against the bandwidth floor
+    line = f"| {stage} | {seconds(ours)} | {base_name} | {seconds(base)} | {shown} | {accuracy} | {note} |"
     print(line, flush=True)
     ROWS.append(line)
 
@@ -131,9 +136,18 @@ def scipy_mart(cams, imgs, grid, iterations, mu=1.0):
     return out.reshape(grid.shape), info["setup_s"] + t_build, t_iter
 
 
+def iteration_bytes(info, imgs):
+    """Bytes one MART iteration must move at least (:func:`bench_mart_bandwidth.mart_bytes`
+    from ``mart``'s info): the weights, voxel indices and row pointers of every camera read
+    once, the active voxels' float32 values read and written once per camera, the float64
+    images read once."""
+    return info["weight_bytes"] + 2 * 4 * info["active_voxels"] * len(imgs) + sum(8 * np.asarray(im).size for im in imgs)
+
+
 def mart_rows(scale, iterations):
     cams, pts, imgs, grid = mart_case(scale)
     truth = an.truth_volume(pts, grid)
+    triad_gbs, copy_gbs = stream_bandwidth()  # the machine's streaming bandwidth, same run
     small = mart_case(0.1)
     rc.mart(small[2], small[0], small[3], iterations=1)  # compile outside the timings
     mart_reference(small[2], small[0], small[3], iterations=1)
@@ -148,6 +162,16 @@ def mart_rows(scale, iterations):
          f"{info['active_voxels'] / 1e6:.2f} M active voxels, weights {info['weight_bytes'] / 2**20:.0f} MiB, "
          f"MART memory {info['memory_bytes'] / 2**20:.0f} MiB = {info['memory_bytes'] / grid.n_voxels:.1f} B per grid "
          f"voxel ({info['memory_bytes'] / max(info['active_voxels'], 1):.0f} B per active voxel); peak RSS {rss:.2f} GiB")
+    # MART's iterations against the streaming bandwidth: the bytes they must move at least
+    moved = iteration_bytes(info, imgs)
+    floor_s = iterations * moved / (triad_gbs * 1e9)
+    emit(label + ", iterations vs bandwidth", info["iterate_s"], "bandwidth floor (bytes moved / triad)", floor_s,
+         f"{iterations * moved / info['iterate_s'] / 1e9:.2f} GB/s = {iterations * moved / info['iterate_s'] / 1e9 / triad_gbs:.3f} "
+         f"of the triad's {triad_gbs:.1f} GB/s",
+         f"{moved / 1e9:.2f} GB per iteration (weights, voxel indices and row pointers read once, voxel values read and "
+         f"written once per camera, images read once); {info['iterate_s'] / iterations / info['weight_entries'] * 1e9:.2f} "
+         f"ns per weight-entry update; np.copyto of 1 GiB {copy_gbs:.1f} GB/s; best of 3, "
+         f"bench/bench_mart_bandwidth.py splits the time")
     # the image floor (floor_rel): the camera's dynamic range lets MLOS prune the analytic tails
     for floor in (1e-4, 1e-3):
         (vf, inf_f), tf, cf = timed(rc.mart, imgs, cams, grid, iterations=iterations, floor_rel=floor,
