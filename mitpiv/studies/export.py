@@ -46,7 +46,7 @@ import numpy as np
 
 from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.progress import Progress, bar
-from mitpiv.studies.shared import run_images
+from mitpiv.studies.shared import read_run_record, run_images, truth_file
 
 __all__ = ["export_vtk", "export_tracking_vtk", "export_tracker_inputs", "export_images", "run_images", "found_positions",
            "particle_errors", "TRACK_SAMPLES", "TRACKERS"]
@@ -58,13 +58,7 @@ TRACK_SAMPLES = 9
 
 
 def _experiment(run: Path) -> dict:
-    from mitpiv.io.records import read_json
-
-    f = run / "experiment.json"
-    if not f.is_file():
-        raise FileFormatError(f"export: {str(run)!r} is not a run folder (no experiment.json); give the --out folder "
-                              "of 'mitpiv run'.")
-    return read_json(f)
+    return read_run_record(run, owner="export")
 
 
 def _need(run: Path, *names: str) -> None:
@@ -362,7 +356,7 @@ def export_tracker_inputs(run_dir, out_dir, *, tool: str, progress: Progress = N
         from mitpiv.io.openlpt import export_openlpt
 
         # the truth: a tomo run's particles stage, a tracking run's field stage
-        truth = next((run / s / "truth.npz" for s in ("particles", "field") if (run / s / "truth.npz").is_file()), None)
+        truth = truth_file(run)
         if "frame_rate_hz" not in options and truth is not None:
             from mitpiv.io import read_truth
 
@@ -407,14 +401,14 @@ def export_images(run_dir, out_dir, *, bits: int = 16, progress: Progress = None
     stack = imgs["files"]
     gain = 1.0
     if imgs["source"] == "sensor":
-        frames = [load_frame(f) for cam in stack for f in cam]
-        fits = all(np.all(a == np.rint(a)) and a.min() >= 0 and a.max() <= top for a in frames)
-        del frames
-        if not fits:
+        def fits(a):  # whole counts within the bit depth: written as they are
+            return bool(np.all(a == np.rint(a)) and a.min() >= 0 and a.max() <= top)
+
+        if not all(fits(load_frame(f)) for cam in stack for f in cam):  # one frame in memory at a time
             gain = intensity_gain(stack, bits=bits, owner="export")
     else:
         gain = intensity_gain(stack, bits=bits, owner="export")
-    truth = next((run / s / "truth.npz" for s in ("particles", "field") if (run / s / "truth.npz").is_file()), None)
+    truth = truth_file(run)
     times = read_truth(truth)["times_s"] if truth is not None else None
     out = Path(out_dir)
     files = {}

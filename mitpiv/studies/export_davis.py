@@ -54,6 +54,7 @@ import numpy as np
 
 from mitpiv.errors import ConfigError, FileFormatError
 from mitpiv.progress import Progress
+from mitpiv.studies.shared import truth_file
 
 __all__ = ["export_davis", "plate_for_box", "DEFAULT_PLANES", "DEFAULT_SPP"]
 
@@ -82,7 +83,7 @@ def plate_for_box(lower_mm, upper_mm):
 def _times(run: Path, frames: list[int]) -> np.ndarray:
     from mitpiv.io import read_truth
 
-    truth = next((run / s / "truth.npz" for s in ("particles", "field") if (run / s / "truth.npz").is_file()), None)
+    truth = truth_file(run)
     if truth is None:
         raise FileFormatError(f"export: the run {str(run)!r} has no truth file (particles/truth.npz or "
                               "field/truth.npz) with its frame times; re-run its first stage.")
@@ -167,7 +168,7 @@ def _write_truth(tmp: Path, run: Path) -> dict | None:
     from mitpiv.io import read_truth
     from mitpiv.io.davis import write_davis_particles
 
-    f = next((run / s / "truth.npz" for s in ("particles", "field") if (run / s / "truth.npz").is_file()), None)
+    f = truth_file(run)
     if f is None:
         return None
     tr = read_truth(f)

@@ -81,6 +81,7 @@ from pathlib import Path
 import numpy as np
 
 from mitpiv.errors import FileFormatError
+from mitpiv.studies.shared import read_run_record, truth_file
 
 __all__ = ["RunQuantities", "run_quantities", "otf_hwhm_px", "image_hwhm_px", "radius_from_hwhm",
            "openlpt_settings_from", "openlpt_settings_for_run", "openptv_settings_from", "openptv_settings_for_run",
@@ -213,13 +214,7 @@ def radius_from_hwhm(hwhm_px: float | None, *, default: float = DEFAULT_PARTICLE
 
 # ------------------------------------------------------------------------------ the run's record
 def _read(run: Path) -> dict:
-    from mitpiv.io.records import read_json
-
-    f = run / "experiment.json"
-    if not f.is_file():
-        raise FileFormatError(f"peer settings: {str(run)!r} is not a run folder (no experiment.json); give the --out "
-                              "folder of 'mitpiv run'.")
-    return read_json(f)
+    return read_run_record(run, owner="peer settings")
 
 
 def _box(exp: dict, run: Path):
@@ -236,10 +231,9 @@ def _box(exp: dict, run: Path):
 def _truth(run: Path):
     from mitpiv.io import read_truth
 
-    for stage in ("particles", "field"):
-        f = run / stage / "truth.npz"
-        if f.is_file():
-            return read_truth(f), f"{stage}/truth.npz"
+    f = truth_file(run)
+    if f is not None:
+        return read_truth(f), f"{f.parent.name}/truth.npz"
     raise FileFormatError(f"peer settings: the run {str(run)!r} has no truth (particles/truth.npz or "
                           "field/truth.npz): the motion per frame and the seeding density come from it; finish the "
                           "run first.")

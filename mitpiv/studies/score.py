@@ -77,6 +77,7 @@ from pathlib import Path
 import numpy as np
 
 from mitpiv.errors import ConfigError, FileFormatError, MitpivError
+from mitpiv.studies.shared import read_run_record, truth_file
 
 __all__ = ["score", "ResultMismatch", "MISMATCH_FACTOR", "ERROR_OUTLIER", "LENGTH_UNITS", "VELOCITY_UNITS",
            "image_plane_truth", "flow_image_reference"]
@@ -126,12 +127,8 @@ def _load_run(run_dir) -> _Run:
     from mitpiv.io import camera_from_metadata, read_json, read_truth
 
     run = Path(run_dir)
-    f = run / "experiment.json"
-    if not f.is_file():
-        raise FileFormatError(f"score: {str(run)!r} is not a run folder (no experiment.json); give the --out folder "
-                              "of 'mitpiv run'.")
-    exp = read_json(f)
-    tf = next((run / s / "truth.npz" for s in ("particles", "field") if (run / s / "truth.npz").is_file()), None)
+    exp = read_run_record(run, owner="score")
+    tf = truth_file(run)
     if tf is None:
         raise FileFormatError(f"score: the run {str(run)!r} has no truth yet (particles/ or field/ truth.npz); run "
                               f"'mitpiv run EXPERIMENT --out {run}' first.")
@@ -293,8 +290,8 @@ def _lattice(points: np.ndarray, rel_tol: float = 1e-4):
         span = float(np.ptp(x)) if x.size else 0.0
         tol = rel_tol * (span if span > 0 else 1.0)
         key = np.rint(x / tol).astype(np.int64)
-        u, inv = np.unique(key, return_inverse=True)
-        vals = np.array([x[inv == i].mean() for i in range(len(u))]) if len(u) <= 4096 else u * tol
+        _, inv = np.unique(key, return_inverse=True)
+        vals = np.bincount(inv, weights=x) / np.bincount(inv)  # each lattice coordinate: its points' mean
         axes.append(vals)
         index.append(inv)
     idx = np.stack(index, axis=1)

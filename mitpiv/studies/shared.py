@@ -38,7 +38,7 @@ from mitpiv.studies.schema import Table, discriminated, model_from_signature
 __all__ = ["RENDER_PACKAGES", "Stage", "StageContext", "Kind", "SceneTable", "flow_union", "resolve_scene_xml", "check_scene_sensors",
            "scene_cameras", "check_coverage", "SceneRig", "scene_rig", "load_scene_rig", "sheet_region", "sheet_focus",
            "check_sheet_focus",
-           "resolve_table_file", "scene_files", "count_for_density", "frame_files", "images", "frame_images",
+           "resolve_table_file", "scene_files", "truth_file", "TRUTH_STAGES", "read_run_record", "count_for_density", "frame_files", "images", "frame_images",
            "volume", "read_tracks", "run_truth", "grid_of", "source_of", "bounds_of", "null_metrics", "flatten",
            "fmt_metric", "pareto_front"]
 
@@ -639,9 +639,7 @@ def run_images(run_dir) -> dict:
     from mitpiv.io import camera_from_metadata, read_exr
 
     run = Path(run_dir)
-    if not (run / "experiment.json").is_file():
-        raise FileFormatError(f"export: {str(run)!r} is not a run folder (no experiment.json); give the --out folder "
-                              "of 'mitpiv run'.")
+    read_run_record(run, owner="export")
     source = next((s for s in ("sensor", "render") if (run / s / "stage.json").is_file()), None)
     files = sorted((run / source).glob("*_frame*.exr")) if source else []
     if not files:
@@ -662,6 +660,29 @@ def run_images(run_dir) -> dict:
     cameras = [camera_from_metadata(read_exr(by_sensor[s][frames[0]])[1]) for s in sensors]
     return {"source": source, "sensors": sensors, "frames": frames,
             "files": [[by_sensor[s][k] for k in frames] for s in sensors], "cameras": cameras}
+
+
+def read_run_record(run, *, owner: str) -> dict:
+    """A finished run folder's ``experiment.json``; a :class:`FileFormatError` naming ``owner``
+    when ``run`` is not a run folder."""
+    from mitpiv.io.records import read_json
+
+    f = Path(run) / "experiment.json"
+    if not f.is_file():
+        raise FileFormatError(f"{owner}: {str(run)!r} is not a run folder (no experiment.json); give the --out "
+                              "folder of 'mitpiv run'.")
+    return read_json(f)
+
+
+#: The stages that write a run's truth: ``particles`` (a tomo run), ``field`` (a tracking or
+#: backlit run).
+TRUTH_STAGES = ("particles", "field")
+
+
+def truth_file(run) -> Path | None:
+    """The truth file of a finished run of any kind (the first of :data:`TRUTH_STAGES` that
+    wrote one), or None."""
+    return next((Path(run) / s / "truth.npz" for s in TRUTH_STAGES if (Path(run) / s / "truth.npz").is_file()), None)
 
 
 def run_truth(run: Path, stage: str) -> dict:
