@@ -81,7 +81,7 @@ def test_a_parameter_added_to_a_docstring_is_listed():
     names = [p.name for p in R.parse_parameters(doc)]
     assert "new_knob_mm" not in names
     params = _by_name(R.parse_parameters(added))
-    assert list(params) == ["rays_per_particle", "new_knob_mm", "occlusion"]
+    assert list(params) == ["rays_per_particle", "new_knob_mm", "occlusion", "batch_rays"]
     knob = params["new_knob_mm"]
     assert (knob.type, knob.unit, knob.default, knob.range) == ("float", "mm", "3.5", "> 0")
     page = R.reference_page([R.parse_plugin_docstring(added, module="particle_tracer", kind="integrator")])

@@ -93,3 +93,44 @@ def test_particle_tracer_noise_falls_as_one_over_spp(tmp_path):
     # negatively correlated), and a pixel's variance is E[d^2] / 2.
     tot = [render(sc, spp=s, seed=7).sum() for s in (1, 16)]
     assert abs(tot[0] - tot[1]) < N_SIGMA * np.sqrt((d2[1].sum() + d2[16].sum()) / 2)
+
+
+@pytest.mark.parametrize("batch_rays", [1024, 2048, 3000])
+def test_batched_tracing_gives_the_same_image(tmp_path, batch_rays):
+    """batch_rays only bounds memory: the rays keep their random sequences and their splats
+    are summed in the same order and vector packets, so the image is bit-identical to one
+    batch. 60 particles x 100 rays: every batch boundary falls inside a particle's rays;
+    3000 is rounded down to 2048; two passes check the pass offset of the sequences."""
+    rng = np.random.default_rng(4)
+    pts = np.column_stack([rng.uniform(-2.0, 2.0, (60, 2)), rng.uniform(-1.0, 1.0, 60)])
+    props = {"f_number": 4.0, "focus_distance_mm": 490.0}
+    one = scene(tmp_path, pts, name="one.ply", cam=camera(res=(48, 48)), sensor_props=props,
+                integrator={"type": "particle_tracer", "rays_per_particle": 100})
+    many = scene(tmp_path, pts, name="many.ply", cam=camera(res=(48, 48)), sensor_props=props,
+                 integrator={"type": "particle_tracer", "rays_per_particle": 100, "batch_rays": batch_rays})
+    ref = render(one, spp=2, seed=3)
+    img = render(many, spp=2, seed=3)
+    assert one.integrator().last_stats["batches"] == 2
+    assert many.integrator().last_stats["batches"] == 2 * -(-6000 // (batch_rays // 1024 * 1024))
+    assert ref.max() > 0
+    np.testing.assert_array_equal(img, ref)
+
+
+def test_batched_sequences_match_the_flat_ray_index():
+    from mitpiv.render.plugins.particle_tracer import batches
+
+    for n, rays, batch in ((5, 3, 4), (3, 10, 4), (4, 4, 100), (1, 1, 1), (2, 2**31, 2**24)):
+        got = list(batches(n, rays, batch))
+        assert sum(c for *_, c in got) == n * rays
+        start = 0
+        for p0, r0, c in got:  # contiguous, in order, each at most batch rays
+            assert p0 * rays + r0 == start and 0 <= r0 < rays and 0 < c <= batch
+            start += c
+
+
+def test_batch_rays_must_be_positive(tmp_path):
+    from mitpiv.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="batch_rays"):
+        scene(tmp_path, np.zeros((1, 3)), cam=camera(res=(8, 8)),
+              integrator={"type": "particle_tracer", "batch_rays": 1000})

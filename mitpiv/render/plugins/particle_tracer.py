@@ -9,6 +9,13 @@ rays_per_particle : integer, default 16, range >= 1
 occlusion : boolean, default false
     Cast a shadow ray from each particle to the sensor (other particles' proxies and
     any scene geometry occlude); off: all particles are seen.
+batch_rays : integer, default 16777216, range >= 1024
+    Rays traced per kernel launch: a pass over ``N x rays_per_particle`` rays runs in
+    consecutive batches of at most this many, so memory stays bounded (about 30 bytes per
+    ray in flight: 0.5 GiB at the default) for any particle count and ray budget. Rounded
+    down to a multiple of 1024, so that batches start on the CPU's vector packets: the
+    image is then bit-identical for every batch size (same random sequences, splats summed
+    in the same order and grouped into the same packets).
 
 Notes
 -----
@@ -70,6 +77,29 @@ from mitpiv.streams import derived_seed
 
 _VARIANT = mi.variant()
 
+#: Default rays per kernel launch (``batch_rays``): 2^24.
+DEFAULT_BATCH_RAYS = 1 << 24
+
+#: Batches hold a multiple of this many rays. Dr.Jit's LLVM kernels sum the scatter-adds of
+#: one vector packet (4-16 lanes) that hit the same pixel before adding them to the image,
+#: so a batch that started inside a packet would round some pixels differently (1 ulp).
+BATCH_ALIGN = 1024
+
+#: Largest ``rays_per_particle``: a batch's ray index within its first particle plus the
+#: batch size must fit the 32-bit lane index.
+MAX_RAYS_PER_PARTICLE = 1 << 31
+
+
+def batches(n: int, rays: int, batch: int):
+    """Consecutive slices of the flat ray index ``k = particle * rays + ray`` (``0 <= k < n
+    rays``), each at most ``batch`` rays: ``(first particle, first ray within it, count)``.
+    Pure integer arithmetic (Python ints, no overflow)."""
+    total, start = n * rays, 0
+    while start < total:
+        count = min(batch, total - start)
+        yield start // rays, start % rays, count
+        start += count
+
 
 def _seed_int(seed) -> int:
     """The render seed as a Python int (``mi.render`` passes what the caller gave: an int or
@@ -108,9 +138,15 @@ class ParticleTracer(mi.CppADIntegrator):
         super().__init__(props)
         rd = PropertyReader(props, "particle_tracer")
         self.rays_per_particle = rd.int("rays_per_particle", 16)
-        if self.rays_per_particle < 1:
-            raise ConfigError(f"particle_tracer: 'rays_per_particle' must be >= 1, got {self.rays_per_particle}.")
+        if not 1 <= self.rays_per_particle <= MAX_RAYS_PER_PARTICLE:
+            raise ConfigError(f"particle_tracer: 'rays_per_particle' must lie in [1, {MAX_RAYS_PER_PARTICLE}], got "
+                              f"{self.rays_per_particle}; use spp (independent passes) for more samples per particle.")
         self.occlusion = rd.bool("occlusion", False)
+        batch = rd.int("batch_rays", DEFAULT_BATCH_RAYS)
+        if batch < BATCH_ALIGN:
+            raise ConfigError(f"particle_tracer: 'batch_rays' must be >= {BATCH_ALIGN}, got {batch}; the default is "
+                              f"{DEFAULT_BATCH_RAYS} (about 0.5 GiB of rays in flight).")
+        self.batch_rays = batch - batch % BATCH_ALIGN
         rd.finish()
         self.last_stats = {}
 
@@ -140,7 +176,7 @@ class ParticleTracer(mi.CppADIntegrator):
         passes = self.passes_for(sensor, spp)
         seed = _seed_int(seed)
         sid = sensor.id() or ""
-        splats = 0
+        splats = batch_count = 0
         for k, emitter in enumerate(self.particle_emitters(scene)):
             center, radius, diameter = emitter.particle_arrays()
             n = dr.width(diameter)
@@ -148,45 +184,58 @@ class ParticleTracer(mi.CppADIntegrator):
                 continue
             state = derived_seed(seed, "particle_tracer", sid, k)  # this sensor's and emitter's stream
             for pas in range(passes):
-                # Pass p draws from PCG32 sequences [p n rays, (p + 1) n rays): pass 0 is the
-                # single-pass render, and no two passes share a sequence.
-                idx = dr.arange(mi.UInt32, n * rays)
-                pid = idx // rays
-                it = dr.zeros(mi.Interaction3f, n * rays)
-                it.p = dr.gather(mi.Point3f, center, pid)
-                it.time = mi.Float(sensor.shutter_open())
-                if sensor.needs_aperture_sample():
-                    # opaque offset and state: every pass and seed reuses one compiled kernel
-                    seq = mi.UInt64(idx) + dr.opaque(mi.UInt64, pas * n * rays)
-                    rng = mi.PCG32(size=n * rays, initstate=dr.opaque(mi.UInt64, state), initseq=seq)
-                    sample = mi.Point2f(rng.next_float32(), rng.next_float32())
-                else:
-                    sample = mi.Point2f(0.5, 0.5)
-                ds, w_sensor = sensor.sample_direction(it, sample, True)
-                active = ds.pdf > 0
-                if self.occlusion:
-                    # Start outside the particle's own proxy shell (circumradius < 1.3 R).
-                    skip = 1.5 * dr.gather(mi.Float, radius, pid)
-                    ray = mi.Ray3f(it.p + ds.d * skip, ds.d, ds.dist - skip, it.time, it.wavelengths)
-                    active &= ~scene.ray_test(ray, active)
-                intensity = emitter.intensity(it.p, dr.gather(mi.Float, diameter, pid), ds.d, it.wavelengths, active)
-                value = intensity * w_sensor[0] * (n_pix / (rays * passes))
-                uv = mi.Point2f(ds.uv)
-                dr.eval(uv, value, active)  # the rays, traced in parallel
-                with serial_accumulation():  # their splats, summed in ray order (module docstring)
-                    block.put(uv, [value], active)
-                    dr.eval(block.tensor())
+                for p0, r0, count in batches(n, rays, self.batch_rays):
+                    self._trace_batch(scene, sensor, emitter, block, (center, radius, diameter),
+                                      p0, r0, count, rays, pas * n * rays, state, n_pix / (rays * passes))
+                    batch_count += 1
                 splats += n * rays
         self.last_stats = {"rays_per_particle": rays, "passes": passes, "samples_per_particle": rays * passes,
                            "spp_requested": int(spp) if spp else None, "splats": splats,
-                           "occlusion": self.occlusion}
+                           "occlusion": self.occlusion, "batches": batch_count, "batch_rays": self.batch_rays}
         img = block.tensor()
         if evaluate:
             dr.eval(img)
         return img
 
+    def _trace_batch(self, scene, sensor, emitter, block, arrays, p0, r0, count, rays, pass_offset, state, scale):
+        """Trace ``count`` rays of flat indices ``k = p0 rays + r0 + j`` (``j < count``) and
+        splat them into ``block``. Ray ``k`` of pass ``p`` seeds its PCG32 generator with state
+        ``S + k`` and sequence ``2 k + p N rays`` (``S`` the emitter's stream; what
+        ``PCG32(size=N rays, initstate=S, initseq=k + p N rays)`` gives lane ``k``, the
+        unbatched form): pass 0 is the single-pass render, no two rays of a render share a
+        (state, sequence) pair, and the batching leaves every ray's sample unchanged. The
+        batch's offsets are opaque, so every batch, pass and seed reuses one compiled kernel."""
+        center, radius, diameter = arrays
+        local = dr.arange(mi.UInt32, count) + dr.opaque(mi.UInt32, r0)  # < rays + batch_rays < 2^32
+        pid = local // rays + dr.opaque(mi.UInt32, p0)
+        it = dr.zeros(mi.Interaction3f, count)
+        it.p = dr.gather(mi.Point3f, center, pid)
+        it.time = mi.Float(sensor.shutter_open())
+        if sensor.needs_aperture_sample():
+            k = mi.UInt64(local) + dr.opaque(mi.UInt64, p0 * rays)
+            rng = mi.PCG32(size=count)
+            rng.seed(initstate=k + dr.opaque(mi.UInt64, state), initseq=2 * k + dr.opaque(mi.UInt64, pass_offset))
+            sample = mi.Point2f(rng.next_float32(), rng.next_float32())
+        else:
+            sample = mi.Point2f(0.5, 0.5)
+        ds, w_sensor = sensor.sample_direction(it, sample, True)
+        active = ds.pdf > 0
+        if self.occlusion:
+            # Start outside the particle's own proxy shell (circumradius < 1.3 R).
+            skip = 1.5 * dr.gather(mi.Float, radius, pid)
+            ray = mi.Ray3f(it.p + ds.d * skip, ds.d, ds.dist - skip, it.time, it.wavelengths)
+            active &= ~scene.ray_test(ray, active)
+        intensity = emitter.intensity(it.p, dr.gather(mi.Float, diameter, pid), ds.d, it.wavelengths, active)
+        value = intensity * w_sensor[0] * scale
+        uv = mi.Point2f(ds.uv)
+        dr.eval(uv, value, active)  # the rays, traced in parallel
+        with serial_accumulation():  # their splats, summed in ray order (module docstring)
+            block.put(uv, [value], active)
+            dr.eval(block.tensor())
+
     def to_string(self):
-        return f"ParticleTracer[rays_per_particle={self.rays_per_particle}, occlusion={self.occlusion}]"
+        return (f"ParticleTracer[rays_per_particle={self.rays_per_particle}, occlusion={self.occlusion}, "
+                f"batch_rays={self.batch_rays}]")
 
 
 mi.register_integrator("particle_tracer", lambda props: ParticleTracer(props))
