@@ -305,3 +305,116 @@ def test_gaussian_point_table_and_point_images():
             PointPSFTable.gaussian(bad)
     with pytest.raises(ConfigError, match="oversample"):
         PointPSFTable.gaussian(1.0, oversample=0)
+
+
+# ------------------------------------------------------------------ decimated PSF convolution
+class TestDecimatedConvolve:
+    """``decimated_convolve`` (what ``RenderPSF.apply`` uses) against the full-resolution path it
+    replaces, ``convolve_psf(fine, k) / s^2`` at the pixel centres ``[s//2::s, s//2::s]``.
+
+    Tolerance 1e-12 of the reference's peak: both sides are float64 sums of the same products,
+    the FFT ones with round-off of about 1e-16 times log2 of the transform size (~1e-15 here);
+    an index error moves whole kernel samples and shows as O(1) of the peak."""
+
+    TOL = 1e-12
+    COARSE = (40, 50)  # (H, W); non-square, so a swapped axis shows
+
+    @staticmethod
+    def _fine(s, rng, n=60, coarse=COARSE):
+        """Bilinear splats of random brightness (a tent-filtered particle render), with particles
+        on the four corners and edges, a few negative pixels (a Catmull-Rom film's lobes)."""
+        shape = (coarse[0] * s, coarse[1] * s)
+        f = np.zeros(shape)
+        ys = np.concatenate([rng.uniform(0, shape[0] - 1, n), [0.0, 0.0, shape[0] - 1.0, shape[0] - 1.0, 0.3, shape[0] - 1.3]])
+        xs = np.concatenate([rng.uniform(0, shape[1] - 1, n), [0.0, shape[1] - 1.0, 0.0, shape[1] - 1.0, shape[1] / 2, 0.6]])
+        iy = np.minimum(ys.astype(int), shape[0] - 2)
+        ix = np.minimum(xs.astype(int), shape[1] - 2)
+        fy, fx = ys - iy, xs - ix
+        a = rng.uniform(0.2, 1.0, ys.size)
+        for dy, wy in ((0, 1 - fy), (1, fy)):
+            for dx, wx in ((0, 1 - fx), (1, fx)):
+                np.add.at(f, (iy + dy, ix + dx), a * wy * wx)
+        f[rng.integers(0, shape[0], 5), rng.integers(0, shape[1], 5)] -= 0.05
+        return f
+
+    @staticmethod
+    def _reference(fine, k, s):
+        return convolve_psf(fine, k)[s // 2::s, s // 2::s] / (s * s)
+
+    def _check(self, fine, k, s):
+        from mitpiv.imaging import decimated_convolve
+
+        ref = self._reference(fine, k, s)
+        peak = ref.max()
+        outs = {m: decimated_convolve(fine, k, s, method=m) / (s * s) for m in ("auto", "direct", "fft")}
+        for m, out in outs.items():
+            assert out.shape == ref.shape and out.min() >= 0.0
+            assert np.abs(out - ref).max() <= self.TOL * peak, (m, np.abs(out - ref).max() / peak)
+        assert np.abs(outs["direct"] - outs["fft"]).max() <= self.TOL * peak
+        return ref
+
+    @pytest.mark.parametrize("s", [1, 3, 5, 7])
+    def test_small_psf_kernel(self, s):
+        from mitpiv.imaging import RenderPSF
+
+        k = RenderPSF(mode="fft", f_number=2.8, pixel_pitch_um=10.0, magnification=0.2, energy_tolerance=0.005,
+                      oversample=s).fft_kernel
+        ref = self._check(self._fine(s, np.random.default_rng(s)), k, s)
+        assert ref[0, 0] > 0.0 and ref[-1, -1] > 0.0  # the corner particles were kept
+
+    @pytest.mark.parametrize("s", [1, 3, 5, 7])
+    def test_large_aberrated_kernel_wider_than_the_image(self, s):
+        from mitpiv.imaging import RenderPSF
+
+        k = RenderPSF(mode="fft", f_number=22.0, pixel_pitch_um=10.0, magnification=1.0, zernike_coefficients=((11, 0.1),),
+                      energy_tolerance=0.005, oversample=s).fft_kernel
+        fine = self._fine(s, np.random.default_rng(10 + s))
+        assert k.shape[0] > fine.shape[0] and k.shape[1] > fine.shape[1]
+        self._check(fine, k, s)
+
+    @pytest.mark.parametrize("s", [1, 3, 5, 7])
+    def test_random_kernel_wider_than_the_image_in_one_axis(self, s):
+        rng = np.random.default_rng(20 + s)
+        fine = self._fine(s, rng)
+        k = rng.uniform(0.0, 1.0, (2 * (fine.shape[0] // 3) + 1, 2 * fine.shape[1] + 5 + 2 * s))
+        assert k.shape[0] < fine.shape[0] and k.shape[1] > fine.shape[1]
+        self._check(fine, k, s)
+        self._check(fine.T.copy(), k.T.copy(), s)  # wider in the other axis
+
+    def test_auto_takes_the_direct_kernel_for_sparse_images_and_the_fft_for_dense(self, monkeypatch):
+        import mitpiv.imaging as im
+
+        calls = []
+        real = im._decimate_kernels()
+        monkeypatch.setattr(im, "_decimate_kernels", lambda: {**real, "direct": lambda *a: (calls.append(1), real["direct"](*a))})
+        fine = self._fine(5, np.random.default_rng(0))
+        small = im.RenderPSF(mode="fft", f_number=2.8, pixel_pitch_um=10.0, magnification=0.2, energy_tolerance=0.005).fft_kernel
+        im.decimated_convolve(fine, small, 5)
+        assert calls == [1]
+        im.decimated_convolve(fine + 0.01, small, 5)  # dense: every fine pixel is non-zero
+        assert calls == [1]
+
+    def test_render_psf_apply(self):
+        from mitpiv.imaging import RenderPSF
+
+        psf = RenderPSF(mode="fft", f_number=8.0, pixel_pitch_um=10.0, magnification=0.5, oversample=5)
+        fine = self._fine(5, np.random.default_rng(3))
+        ref = self._reference(fine, psf.fft_kernel, 5)
+        np.testing.assert_allclose(psf.apply(fine), ref, rtol=0, atol=self.TOL * ref.max())
+        with pytest.raises(ConfigError, match="5 times"):
+            psf.apply(fine[:-1])
+
+    def test_bad_input(self):
+        from mitpiv.imaging import decimated_convolve
+
+        img = np.zeros((15, 15))
+        with pytest.raises(ConfigError, match="odd"):
+            decimated_convolve(img, np.ones((4, 3)), 3)
+        with pytest.raises(ConfigError, match="multiple"):
+            decimated_convolve(img, np.ones((3, 3)), 4)
+        with pytest.raises(ConfigError, match="step"):
+            decimated_convolve(img, np.ones((3, 3)), 0)
+        with pytest.raises(ConfigError, match="method"):
+            decimated_convolve(img, np.ones((3, 3)), 3, method="fast")
+        with pytest.raises(ConfigError, match="2D"):
+            decimated_convolve(img[0], np.ones((3, 3)), 3)
