@@ -28,6 +28,7 @@ bench: setup
 	$(PY) bench/bench_speed.py --quick
 	$(PY) bench/bench_demo.py
 	$(PY) bench/bench_cameras.py
+	$(PY) bench/bench_render_papers.py --quick
 	$(PY) bench/bench_mie.py
 	$(PY) bench/bench_jet.py
 	$(PY) bench/bench_optics.py
