@@ -21,6 +21,11 @@
 5. Interpolants (the design's alternatives): the largest relative error of uniform grids
    interpolated linearly, linearly in log p, by PCHIP and by a cubic spline, against the
    default's adaptive grid with linear interpolation (5 and 20 um).
+6. The table's interval lookup per ray: 50M uniform random angles in [0, 3.1] through
+   ``mi.math.find_interval`` over all nodes (the former lookup) and through the uniform
+   grid with its fixed-step binary search (``interval``), on the default 1, 5 and 20 um
+   tables; ns per lookup net of generating the angles (best of 3 after a compiling call),
+   ratio in the same run.
 """
 
 from __future__ import annotations
@@ -172,7 +177,7 @@ def main():
     ply = write_particles_ply(tmp / "p.ply", p.positions_mm, p.diameters_um, proxy_radius_mm=0.01)
     rot, pos = place_camera(azimuth_deg=25.0, elevation_deg=55.0, distance_mm=500.0)
     cam = PinholeCamera((512, 512), 85.0, 10.0, rotation=rot, position_mm=pos)
-    sections = set(sys.argv[1:]) or {"1", "2", "3", "4", "5"}  # e.g. `python bench/bench_mie.py 4 5`
+    sections = set(sys.argv[1:]) or {"1", "2", "3", "4", "5", "6"}  # e.g. `python bench/bench_mie.py 4 5`
     if "1" in sections:
         table_times()
     if "2" in sections:
@@ -183,6 +188,8 @@ def main():
         per_size(tmp, cam)
     if "5" in sections:
         interpolants()
+    if "6" in sections:
+        lookup_times()
 
 
 SETTINGS = [("1024 angles (former default)", {"angles": 1024}), ("8192 angles", {"angles": 8192}),
@@ -257,6 +264,39 @@ def interpolants():
         tab = mie.phase_table(d, 1.45)
         print(f"{d:4g}um adaptive {tab.angles:5d}: linear {max_error(tab, (th, par, per)):.1e} (the default)")
 
+
+def lookup_times(count=50_000_000):
+    import drjit as dr
+
+    from mitpiv.render.plugins.mie_phase import AngleNodes, interval
+
+    print(f"\n6. Interval lookup, {count // 1_000_000}M uniform random angles in [0, 3.1] (ns per lookup, net of "
+          f"generating the angles; the three kernels timed in turn, best of 5 after a compiling call)")
+
+    def angles():
+        return 3.1 * mi.sample_tea_float32(dr.arange(mi.UInt32, count), mi.UInt32(7))
+
+    def find_interval(nodes, n, theta):  # the former lookup: a binary search over all nodes
+        i = mi.math.find_interval(n, lambda k: dr.gather(mi.Float, nodes, k) <= theta)
+        t0 = dr.gather(mi.Float, nodes, i)
+        width = dr.gather(mi.Float, nodes, i + 1) - t0
+        return i, dr.clip((theta - t0) / width, 0.0, 1.0), width
+
+    def seconds(f):
+        t0 = time.perf_counter()
+        dr.eval(f())
+        dr.sync_thread()
+        return time.perf_counter() - t0
+
+    print(f"{'size':>6s} {'nodes':>7s} {'cells':>8s} {'span':>5s} {'steps':>6s} {'find_interval':>14s} {'grid':>6s} {'ratio':>6s}")
+    for d in (1.0, 5.0, 20.0):
+        table = AngleNodes(mie.phase_table(d, 1.45).theta[::-1])
+        kernels = (angles, lambda tb=table: find_interval(tb.nodes, tb.n, angles()), lambda tb=table: interval(tb, angles()))
+        ts = [[seconds(f) for f in kernels] for _ in range(6)][1:]  # interleaved: the same load on each
+        base, t_old, t_new = (min(t[k] for t in ts) for k in range(3))
+        t_old, t_new = ((t - base) / count * 1e9 for t in (t_old, t_new))
+        print(f"{d:4g}um {table.n:7d} {table.cells:8d} {table.max_span:5d} {table.steps:6d} {t_old:14.1f} {t_new:6.1f} "
+              f"{t_old / t_new:6.2f}", flush=True)
 
 if __name__ == "__main__":
     main()

@@ -57,11 +57,15 @@ diameter  x      nodes  max rel. error   build [ms]  1024: max error  build [ms]
 ========  =====  =====  ===============  ==========  ===============  ==========
 
 Render time does not change measurably (particle tracing of 200k particles and camera
-tracing at 16 spp: 0.8-1.1 times the former default's, within the run-to-run noise): the
-lookup is a binary search, up to 14 steps instead of 10. The node count grows as
-``x / sqrt(tolerance)`` (:func:`mitpiv.physics.mie.adaptive_angles_estimate`; x = 1000:
-116,000 nodes in 4 s); a table whose estimated memory or build time exceeds 4 GiB or
-300 s (x = 1e4 at the default tolerance) is refused before it is built, with the estimate
+tracing at 16 spp: 0.8-1.1 times the former default's, within the run-to-run noise). The
+interval lookup per ray hardly depends on the node count: a uniform grid of 4-16 cells per
+node gives an angle's first candidate interval, then a few fixed binary-search steps (2-3
+for 1-20 um droplets) finish it (:func:`interval`; 20 um: 7 ns per lookup instead of 19
+for a binary search over all 13810 nodes, ``bench/bench_mie.py`` section 6). The node
+count grows as ``x / sqrt(tolerance)``
+(:func:`mitpiv.physics.mie.adaptive_angles_estimate`; x = 1000: 116,000 nodes in 4 s); a
+table whose estimated memory or build time exceeds 4 GiB or 300 s (x = 1e4 at the default
+tolerance) is refused before it is built, with the estimate
 and the fix (loosen ``tolerance``, or give ``angles``). The ``describe()`` metadata
 records the nodes, the tolerance and the measured ``max_error``.
 
@@ -120,9 +124,93 @@ def scattering_angle(w_a, w_b):
     return 2.0 * dr.atan2(dr.norm(w_a - w_b), dr.norm(w_a + w_b))
 
 
-def interval(nodes: mi.Float, n: int, theta):
-    """Index i with nodes[i] <= theta < nodes[i+1], the fraction t in [0, 1] and the width."""
-    i = mi.math.find_interval(n, lambda k: dr.gather(mi.Float, nodes, k) <= theta)
+class AngleNodes:
+    """Ascending float32 table nodes with a uniform acceleration grid for :func:`interval`.
+
+    Built once, when a table is uploaded. ``cells`` (G) equal cells split
+    ``[nodes[0], nodes[-1]]``: the smallest power of two of at least 4 cells per node,
+    doubled (up to 16 per node and ``MAX_CELLS``) while that saves a search step; a
+    float32 angle's cell is ``(theta - nodes[0]) * scale`` truncated and clamped to
+    [0, G-1] (NaN to cell 0), computed at build time in float32 operation by operation as
+    the kernel computes it. Cell c stores the first interval an angle in it can lie in:
+    the number of interior nodes (1 .. n-2) whose own cell is below c. The interior nodes
+    of one cell bound the search there (a node of a later cell is above every angle of
+    cell c): ``steps`` fixed binary-search steps, the bit length of ``max_span``, the most
+    interior nodes in one cell (a Python int, so the kernel's loop is unrolled). Both the
+    cell and the interval index are monotone in theta, so the result is exactly
+    ``mi.math.find_interval``'s over all nodes for every float32 angle (checked on every
+    float32 in [0, 3.2] for the default 1, 5 and 20 um tables). The default tables of
+    1 / 5 / 20 um DEHS droplets give G = 8192 / 65536 / 131072 (9-16 cells per node),
+    ``max_span`` 3 / 4 / 7 and 2 / 3 / 3 steps; a 40 um droplet 5, a fixed ``angles``
+    table 1.
+
+    ``nodes`` (``mi.Float``) and ``n`` are the table's; ``cells``, ``max_span``, ``steps``
+    describe the grid.
+    """
+
+    CELLS_PER_NODE = 4  # the smallest grid, in cells per node; doubled while that saves a step
+    MAX_CELLS_PER_NODE = 16
+    MAX_CELLS = 1 << 22  # 16 MiB of cell starts (fixed tables of > 1M angles)
+
+    def __init__(self, nodes, cells: int | None = None):
+        th = np.ascontiguousarray(nodes, dtype=np.float32)
+        n = int(th.size)
+        if n < 2:
+            raise ValueError(f"AngleNodes: a table needs at least 2 nodes, got {n}.")
+        self.nodes, self.n = mi.Float(th), n
+        if cells is not None:
+            self._grid(th, int(cells))
+        else:
+            g = min(1 << int(math.ceil(math.log2(self.CELLS_PER_NODE * n))), self.MAX_CELLS)
+            self._grid(th, g)
+            while 2 * g <= min(self.MAX_CELLS_PER_NODE * n, self.MAX_CELLS):
+                fewer = self.steps
+                self._grid(th, 2 * g)
+                if self.steps >= fewer:  # no step saved: keep the smaller grid
+                    self._grid(th, g)
+                    break
+                g *= 2
+        self.start = mi.UInt32(self._start.astype(np.uint32))
+        del self._start
+
+    def _grid(self, th: np.ndarray, cells: int) -> None:
+        """Grid of ``cells`` cells over the float32 nodes ``th`` (NumPy; sets scale, start, steps)."""
+        n = th.size
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            scale = np.float32(cells / (float(th[-1]) - float(th[0])))
+        if not np.isfinite(scale) or scale <= 0:
+            scale = np.float32(0.0)  # degenerate range: one cell, a plain binary search
+        self.cells, self.lo, self.scale, self.top = cells, float(th[0]), float(scale), float(cells - 1)
+        cell = self._cell_np(th[1:n - 1])  # cells of the interior nodes 1 .. n-2 (non-decreasing)
+        self._start = np.searchsorted(cell, np.arange(cells), side="left")  # interior nodes below cell c
+        span = np.diff(np.append(self._start, n - 2))  # interior nodes in cell c
+        self.max_span = int(span.max())
+        self.steps = self.max_span.bit_length()
+
+    def _cell_np(self, theta: np.ndarray) -> np.ndarray:
+        """Cells of float32 angles, in float32 operation by operation as :meth:`cell` computes them."""
+        u = (np.asarray(theta, np.float32) - np.float32(self.lo)) * np.float32(self.scale)
+        return np.where(u > 0, np.minimum(u, np.float32(self.top)), np.float32(0.0)).astype(np.int64)
+
+    def cell(self, theta):
+        """Grid cell of ``theta`` (Dr.Jit), as :meth:`_cell_np`."""
+        u = (theta - self.lo) * self.scale
+        return mi.UInt32(dr.select(u > 0, dr.minimum(u, self.top), 0.0))
+
+
+def interval(table: AngleNodes, theta):
+    """Index i with nodes[i] <= theta < nodes[i+1], the fraction t in [0, 1] and the width.
+
+    ``i`` is exactly ``mi.math.find_interval`` over the nodes (clamped to [0, n-2]; NaN
+    gives 0), found in ``table``'s acceleration grid: one gather for the angle's first
+    candidate interval, then ``table.steps`` fixed binary-search steps (2-3 for the default
+    1-20 um tables, instead of ~14 over all their nodes; see :class:`AngleNodes`).
+    """
+    nodes, last = table.nodes, table.n - 2
+    i = dr.gather(mi.UInt32, table.start, table.cell(theta))
+    for s in reversed([1 << b for b in range(table.steps)]):  # unrolled: steps is a Python int
+        k = dr.minimum(i + s, last)
+        i = dr.select(dr.gather(mi.Float, nodes, k) <= theta, k, i)
     t0 = dr.gather(mi.Float, nodes, i)
     width = dr.gather(mi.Float, nodes, i + 1) - t0
     return i, dr.clip((theta - t0) / width, 0.0, 1.0), width
@@ -238,7 +326,8 @@ class MiePhase(mi.PhaseFunction):
         g /= np.sum(0.5 * (g[1:] + g[:-1]) * np.diff(theta))  # the interpolant integrates to 1
         self._theta_np, self._g_np = theta, g
         self._n = theta.size
-        self._theta = mi.Float(theta.astype(np.float32))
+        self._nodes = AngleNodes(theta)  # the float32 nodes, with the grid of the interval lookup
+        self._theta = self._nodes.nodes
         self._g = mi.Float(g.astype(np.float32))
         self._distr = mi.IrregularContinuousDistribution(self._theta, self._g)
         self._table = self._last_table = t
@@ -261,7 +350,7 @@ class MiePhase(mi.PhaseFunction):
         """Phase function [1/sr] at scattering angles ``theta`` [rad] (the table's interpolant)."""
         if not self._require():
             return dr.zeros(mi.Float, dr.width(theta))
-        i, t, width = interval(self._theta, self._n, theta)
+        i, t, width = interval(self._nodes, theta)
         g0 = dr.gather(mi.Float, self._g, i)
         g1 = dr.gather(mi.Float, self._g, i + 1)
         g = dr.lerp(g0, g1, t)

@@ -135,10 +135,13 @@ class TracerParticles(MitpivEmitter):
 
     def _bind_mie(self, diameters_um) -> None:
         """Upload the Mie differential cross-section table (rows: diameters, columns: angles)."""
+        from mitpiv.render.plugins.mie_phase import AngleNodes
+
         t = self.phase.cross_section_table(diameters_um, wavelength_nm=self.wavelength_nm())
         rows, cols = t["par"].shape
+        nodes = AngleNodes(t["theta"])  # float32 angles with the grid of the interval lookup
         self._xs = {
-            "theta": mi.Float(t["theta"].astype(np.float32)), "n": cols, "rows": rows,
+            "theta": nodes.nodes, "nodes": nodes, "n": cols, "rows": rows,
             "d0": t["d0_um"], "inv_dd": 0.0 if rows == 1 else 1.0 / t["dd_um"],
             "par": mi.Float(t["par"].astype(np.float32).ravel()), "per": mi.Float(t["per"].astype(np.float32).ravel()),
         }
@@ -148,7 +151,7 @@ class TracerParticles(MitpivEmitter):
 
         xs = self._xs
         k = mi.Vector3f(self.laser_direction())
-        i, t, _ = interval(xs["theta"], xs["n"], scattering_angle(w_out, k))
+        i, t, _ = interval(xs["nodes"], scattering_angle(w_out, k))
         if xs["rows"] == 1:
             rows = [(mi.UInt32(0), mi.Float(1.0))]
         else:
