@@ -319,15 +319,18 @@ class SyntheticTurbulence:
             f = np.sinc(self._kappa[:, 0] * lx / (2 * math.pi)) * np.sinc(self._kappa[:, 2] * lz / (2 * math.pi))
             t, u = t * f[:, None], u * f[:, None]
         step = max(1, int(chunk) * 1000 // self.modes)
-        for s in range(0, len(x), step):  # chunks bound the (N, M) memory; each is vectorised
+        kappa = np.ascontiguousarray(self._kappa, dtype=np.float64)
+        phase = np.ascontiguousarray(self._phase, dtype=np.float64)
+        t, u = np.ascontiguousarray(t, dtype=np.float64), np.ascontiguousarray(u, dtype=np.float64)
+        for s in range(0, len(x), step):  # chunks bound the (N, 27) sums' memory
             xs = x[s : s + step]
-            xs_rel = xs - np.array([0.0, self.center_y_plus, 0.0])
-            th = xs_rel @ self._kappa.T + self._phase
-            ct = (np.cos(th) @ t).reshape(-1, 3, 3, 3)
-            st = (np.sin(th) @ u).reshape(-1, 3, 3, 3)
+            xs_rel = np.ascontiguousarray(xs - np.array([0.0, self.center_y_plus, 0.0]))
+            ct = np.empty((len(xs), 27))
+            st = np.empty((len(xs), 27))
+            _mode_sums()(xs_rel, kappa, phase, t, u, ct, st)
             ys = xs[:, 1]
-            out[s : s + step] = (np.einsum("pij,pija->pa", self._g(ys), ct)
-                                 + np.einsum("pij,pija->pa", self._dg(ys), st))
+            out[s : s + step] = (np.einsum("pij,pija->pa", self._g(ys), ct.reshape(-1, 3, 3, 3))
+                                 + np.einsum("pij,pija->pa", self._dg(ys), st.reshape(-1, 3, 3, 3)))
         return out
 
     def streamwise_integral_length(self) -> float:
@@ -339,3 +342,35 @@ class SyntheticTurbulence:
         a = self.A_c[0]
         mm = np.linalg.norm(m)
         return self.integral_length_plus / (2 * mm) * (1 + (a @ m / mm) ** 2 / (a @ a))
+
+
+@cache
+def _mode_sums():
+    """Numba kernel: ``ct[p] = sum_n cos(theta_n(p)) t_n``, ``st[p] = sum_n sin(theta_n(p)) u_n``
+    with ``theta_n(p) = kappa_n . x_p + psi_n``, parallel over points, each point's sum in
+    mode order (deterministic). Written by hand: the NumPy form (an (N, M) phase matrix, its
+    cos and sin, two matrix products) is dominated by float64 ``np.cos`` / ``np.sin`` (31 ns
+    per element on the 2-core VM, 120 ns while the machine was shared); fused, 2 x 10^4
+    points at M = 1000 take 0.54 s instead of 1.25 s (values within 1e-15)."""
+    from mitpiv._numba import numba
+
+    nb = numba()
+
+    @nb.njit(parallel=True, cache=True)
+    def mode_sums(x, kappa, phase, t, u, ct, st):
+        n, m, w = x.shape[0], kappa.shape[0], t.shape[1]
+        for p in nb.prange(n):
+            for q in range(w):
+                ct[p, q] = 0.0
+                st[p, q] = 0.0
+            x0, x1, x2 = x[p, 0], x[p, 1], x[p, 2]
+            for j in range(m):
+                th = x0 * kappa[j, 0] + x1 * kappa[j, 1] + x2 * kappa[j, 2] + phase[j]
+                c = math.cos(th)
+                sn = math.sin(th)
+                for q in range(w):
+                    ct[p, q] += c * t[j, q]
+                    st[p, q] += sn * u[j, q]
+
+    return mode_sums
+
