@@ -169,37 +169,6 @@ def _variants():
                             vol[indices[q]] *= math.exp(lr * data[q])
 
     @nb.njit(parallel=True)
-    def poly7_small(indptr, indices, data, img, w, span, vol, mu, xmax):
-        """:func:`poly_small` with the degree-7 polynomial (|lr| <= xmax: error xmax^8/8!)."""
-        h = img.shape[0] // w
-        one = np.float32(1.0)
-        c2 = np.float32(0.5)
-        c3 = np.float32(1.0 / 6.0)
-        c4 = np.float32(1.0 / 24.0)
-        c5 = np.float32(1.0 / 120.0)
-        c6 = np.float32(1.0 / 720.0)
-        c7 = np.float32(1.0 / 5040.0)
-        for colour in range(span):
-            n = (h - colour + span - 1) // span
-            for rr in nb.prange(n):
-                row = colour + rr * span
-                for col in range(w):
-                    p = row * w + col
-                    update, r = mart_log_ratio(p, indptr, indices, data, img, vol)
-                    if not update:
-                        continue
-                    lr = np.float32(mu * r)
-                    if lr == 0.0:
-                        continue
-                    if abs(lr) <= xmax:
-                        for q in range(indptr[p], indptr[p + 1]):
-                            x = lr * data[q]
-                            vol[indices[q]] *= one + x * (one + x * (c2 + x * (c3 + x * (c4 + x * (c5 + x * (c6 + x * c7))))))
-                    else:
-                        for q in range(indptr[p], indptr[p + 1]):
-                            vol[indices[q]] *= math.exp(lr * data[q])
-
-    @nb.njit(parallel=True)
     def poly_buffered(indptr, indices, data, img, w, span, vol, mu, xmax, maxrow):
         """Fused: the projection keeps the gathered voxel values in a row buffer; for
         |lr| <= xmax the factors exp(lr w) come from a degree-7 Taylor polynomial in a
@@ -249,7 +218,7 @@ def _variants():
                         vol[indices[s + q]] = buf[q] * fac[q]
 
     @nb.njit(parallel=True)
-    def mart_wave(indptr, indices, data, img, w, span, vol, mu, block):
+    def mart_wave(indptr, indices, data, img, w, span, vol, mu, block, lrmax):
         """Not kept (slower, measured): the library's sweep in a wavefront order that gives the same result bit for bit and
         keeps the voxels in cache. Row ``colour + j span`` (group ``g = j // block``) runs at
         step ``2 colour - g``, the steps in increasing order, a step's rows in parallel. Two
@@ -271,7 +240,7 @@ def _variants():
                 if row >= h:
                     continue
                 for col in range(w):
-                    mart_row_f32(row * w + col, indptr, indices, data, img, vol, mu)
+                    mart_row_f32(row * w + col, indptr, indices, data, img, vol, mu, lrmax)
 
     @nb.njit
     def lr_histogram(indptr, indices, data, img, w, span, vol, mu, edges, counts):
@@ -287,7 +256,7 @@ def _variants():
                     counts[e] += indptr[p + 1] - indptr[p]
                     break
 
-    return project_only, project_cached, linear_update, poly_small, poly7_small, poly_buffered, mart_wave, lr_histogram
+    return project_only, project_cached, linear_update, poly_small, poly_buffered, mart_wave, lr_histogram
 
 
 def voxel_orders(idx, grid, brick):
@@ -334,8 +303,7 @@ def main(argv=None):
     print(f"grid {grid.shape[2]}x{grid.shape[1]}x{grid.shape[0]}, {len(idx) / 1e6:.2f} M active voxels, "
           f"{nnz / 1e6:.1f} M weight entries, {nbytes / 1e9:.2f} GB per iteration", flush=True)
     k = kernels()
-    (project_only, project_cached, linear_update, poly_small, poly7_small, poly_buffered, mart_wave,
-     lr_hist) = _variants()
+    project_only, project_cached, linear_update, poly_small, poly_buffered, mart_wave, lr_hist = _variants()
     maxrow = int(max(np.diff(c.indptr).max() for c in cws))
     mu = 1.0
 
@@ -355,20 +323,27 @@ def main(argv=None):
         for cw, f in zip(cws, flat, strict=True):
             k["mart_camera_f32"](cw.indptr, cw.indices, cw.data, f, cw.width, cw.span, vol, mu, cw.wmax)
 
+    def wave(vol):  # the library sweep's rows (its Taylor bound per camera) in wavefront order
+        for cw, f in zip(cws, flat, strict=True):
+            mart_wave(cw.indptr, cw.indices, cw.data, f, cw.width, cw.span, vol, mu, 4,
+                      np.float32(0.4 / cw.wmax if cw.wmax > 0 else 0.0))
+
     def cached_run(vol):
         for cw, f, o in zip(cws, flat, outs, strict=True):
             project_cached(cw.indptr, cw.indices, cw.data, f, cw.width, cw.span, vol, o)
 
-    cases = {"exp factor (the sweep before issue 50)": sweep(poly7_small, mu, np.float32(-1.0)),
+    # the library's float32 sweep: wmax inf keeps exp for every entry (the sweep before issue 50),
+    # wmax 1 takes the Taylor-7 factor for |lr| <= 0.4
+    cases = {"exp factor (the sweep before issue 50)": sweep(k["mart_camera_f32"], mu, math.inf),
              "library sweep (mart_camera_f32, Taylor factor)": library,
              "float64 factor (mart_camera)": sweep(k["mart_camera"], mu),
              "projection only": proj_run,
              "projection, gathers from 16 KiB (timing only)": cached_run,
              "update 1 + lr w (timing only)": sweep(linear_update, mu),
              f"Taylor-5 factor for |lr| <= {a.xmax:g}": sweep(poly_small, mu, np.float32(a.xmax)),
-             "Taylor-7 factor for |lr| <= 0.4": sweep(poly7_small, mu, np.float32(0.4)),
+             "Taylor-7 factor for |lr| <= 0.4": sweep(k["mart_camera_f32"], mu, 1.0),
              "fused buffer, Taylor-7 pass for |lr| <= 0.4": sweep(poly_buffered, mu, np.float32(0.4), maxrow),
-             "wavefront order (mart_wave, block 4)": sweep(mart_wave, mu, 4)}
+             "wavefront order (mart_wave, block 4)": wave}
     if a.few:
         keep = ("exp factor", "library", "projection", "update 1")
         cases = {n: f for n, f in cases.items() if n.startswith(keep)}
