@@ -45,6 +45,8 @@ for Q* and Spearman's Q') has nothing to correlate: those return 0.0 for it, nev
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy.special import erf
 
@@ -52,7 +54,7 @@ from mitpiv.errors import ConfigError
 from mitpiv.grid import VoxelGrid
 
 __all__ = ["quality_q", "quality_q_zero_mean", "rank_correlation", "rank_correlations", "average_ranks", "plane_snr", "normalised_snr", "snr_from_fits",
-           "truth_volume", "occupancy_volume"]
+           "truth_volume", "occupancy_volume", "sphere_volume"]
 
 
 def _pair(rec, truth, what):
@@ -365,3 +367,84 @@ def occupancy_volume(particles, grid: VoxelGrid, *, intensities=None) -> np.ndar
     ok = (q[:, 0] >= 0) & (q[:, 0] < nx) & (q[:, 1] >= 0) & (q[:, 1] < ny) & (q[:, 2] >= 0) & (q[:, 2] < nz)
     flat = (q[ok, 2] * ny + q[ok, 1]) * nx + q[ok, 0]
     return np.bincount(flat, weights=amp[ok], minlength=grid.n_voxels).reshape(grid.shape)
+
+
+
+#: nodes per axis of the tabulated octant fraction F (sphere_volume), and lattice cells per node
+#: spacing of the midpoint rule that fills it
+_OCTANT_NODES = 64
+_OCTANT_CELLS = 3
+
+
+@lru_cache(maxsize=1)
+def _octant_table() -> np.ndarray:
+    """F[i, j, k]: volume fraction of the unit ball with x < t_i, y < t_j, z < t_k, on the
+    nodes ``t = -1 + 2 m / 64``: a midpoint rule on a lattice of 192 cells per axis whose
+    cell faces fall on the nodes, so the only error is the cells straddling the sphere's
+    surface (about 3e-4 of the volume)."""
+    nb, nc = _OCTANT_NODES, _OCTANT_CELLS
+    n = nb * nc
+    c = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+    counts = np.zeros((nb, nb, nb))
+    for iz in range(n):  # one slab of cells at a time (memory)
+        x, y = np.meshgrid(c, c, indexing="ij")
+        inside = x * x + y * y + c[iz] ** 2 <= 1.0
+        ii = np.nonzero(inside)
+        h = np.bincount((ii[0] // nc) * nb + ii[1] // nc, minlength=nb * nb).reshape(nb, nb)
+        counts[:, :, iz // nc] += h
+    f = np.zeros((nb + 1, nb + 1, nb + 1))
+    f[1:, 1:, 1:] = counts.cumsum(0).cumsum(1).cumsum(2)
+    return f / f[-1, -1, -1]
+
+
+def sphere_volume(particles, grid: VoxelGrid, diameter_mm: float, *, intensities=None) -> np.ndarray:
+    """The true volume of spherical particles voxelised by volume: each voxel holds the
+    fraction of every particle's sphere (``diameter_mm``) inside it, times the particle's
+    intensity (default 1), so a particle's voxels sum to its intensity when it is wholly
+    inside the grid (parts outside the grid are dropped).
+
+    Each voxel's fraction is an inclusion-exclusion of the octant fraction F(tx, ty, tz)
+    (the part of the ball below three axis-aligned planes at tx, ty, tz radii from its
+    centre), tabulated once on 65^3 nodes and interpolated trilinearly: within 1e-3 of the
+    exact spherical cap (tests/analysis/test_sphere_volume.py). A particle much smaller
+    than a voxel lands in the voxel holding its centre (as with :func:`occupancy_volume`);
+    one larger spreads over the voxels it reaches, on anisotropic grids too.
+    Hand-written: no kept library voxelises spheres by volume fraction.
+
+    Returns
+    -------
+    (n_z, n_y, n_x) float64 volume
+    """
+    from scipy.ndimage import map_coordinates
+
+    if not isinstance(grid, VoxelGrid):
+        raise ConfigError(f"sphere_volume: 'grid' must be a VoxelGrid, got {type(grid).__name__}.")
+    if not (np.isfinite(diameter_mm) and diameter_mm > 0):
+        raise ConfigError(f"sphere_volume: 'diameter_mm' must be > 0, got {diameter_mm!r}.")
+    p = _particle_positions(particles)
+    amp = np.ones(len(p)) if intensities is None else np.broadcast_to(np.asarray(intensities, dtype=float), (len(p),))
+    if not np.all(np.isfinite(amp)):
+        raise ConfigError("sphere_volume: 'intensities' must be finite.")
+    f = _octant_table()
+    nz, ny, nx = grid.shape
+    q = grid.to_voxel(p)  # continuous voxel coordinates (x, y, z); voxel k spans [k - 0.5, k + 0.5)
+    r = 0.5 * diameter_mm / np.asarray(grid.voxel_mm, dtype=float)  # radius in voxels per axis
+    m = np.ceil(2 * r).astype(int) + 1  # voxels a sphere can reach per axis
+    k0 = np.floor(q - r + 0.5).astype(np.int64)  # first voxel each sphere reaches
+    t = []  # the planes bounding those voxels, in radii from the centre, clipped to the ball
+    for a in range(3):
+        b = k0[:, a : a + 1] + np.arange(m[a] + 1)[None, :] - 0.5
+        t.append(np.clip((b - q[:, a : a + 1]) / r[a], -1.0, 1.0))
+    nodes = (np.stack(np.broadcast_arrays(t[0][:, :, None, None], t[1][:, None, :, None], t[2][:, None, None, :]), 0)
+             + 1.0) * (_OCTANT_NODES / 2.0)
+    fv = map_coordinates(f, nodes.reshape(3, -1), order=1, mode="nearest").reshape(nodes.shape[1:])
+    frac = np.diff(np.diff(np.diff(fv, axis=1), axis=2), axis=3)  # (N, mx, my, mz)
+    ix = k0[:, 0:1] + np.arange(m[0])
+    iy = k0[:, 1:2] + np.arange(m[1])
+    iz = k0[:, 2:3] + np.arange(m[2])
+    ok = ((ix >= 0) & (ix < nx))[:, :, None, None] & ((iy >= 0) & (iy < ny))[:, None, :, None] & \
+         ((iz >= 0) & (iz < nz))[:, None, None, :]
+    flat = (iz[:, None, None, :] * ny + iy[:, None, :, None]) * nx + ix[:, :, None, None]
+    w = frac * amp[:, None, None, None]
+    ok &= w > 0
+    return np.bincount(flat[ok], weights=w[ok], minlength=grid.n_voxels).reshape(grid.shape)
