@@ -329,6 +329,32 @@ def kernels() -> dict:
                 + fr * ((1.0 - fc) * img[off + r1 * w + c0] + fc * img[off + r1 * w + c1]))
 
     @nb.njit(parallel=True, cache=True)
+    def refocus_homography(img, offs, hs, ws, hom, xs, ys, out):
+        """One plane of additive synthetic-aperture refocusing (eq. 2.3 of the SAPIV study):
+        ``out[q]`` = the mean, over the cameras whose image holds the point, of each camera's
+        bilinear sample (:func:`sample_linear`) at the homography's image ``H_c (x_q, y_q, 1)``
+        (0 where no camera holds it). ``hom``: (n_cam, 3, 3); ``img``: the images raveled one
+        after another from ``offs``. The same sum and count as ``refocus_planes``' NumPy path
+        (map_coordinates per camera), fused, in parallel over the points."""
+        n = xs.shape[0]
+        nc = hom.shape[0]
+        for q in nb.prange(n):
+            x = xs[q]
+            y = ys[q]
+            acc = 0.0
+            cnt = 0
+            for c in range(nc):
+                den = hom[c, 2, 0] * x + hom[c, 2, 1] * y + hom[c, 2, 2]
+                u = (hom[c, 0, 0] * x + hom[c, 0, 1] * y + hom[c, 0, 2]) / den
+                v = (hom[c, 1, 0] * x + hom[c, 1, 1] * y + hom[c, 1, 2]) / den
+                h = hs[c]
+                w = ws[c]
+                acc += sample_linear(img, offs[c], h, w, u, v)
+                if u >= 0.0 and u <= w and v >= 0.0 and v <= h:
+                    cnt += 1
+            out[q] = acc / cnt if cnt > 0 else 0.0
+
+    @nb.njit(parallel=True, cache=True)
     def mlos_pinhole(xs, ys, z, cams, img, offs, hs, ws, exponent, prune, val, keep):
         """MLOS value of every voxel of the plane at depth ``z`` (flat (y, x) order) and
         whether it is a candidate: ``val = exp(exponent sum_c log I_c(P_c(x)))`` (0 when a

@@ -153,24 +153,32 @@ def refocus_planes(images, mappings, xy_mm, z_mm, *, warp: str = "homography", t
     peak = np.empty(len(z))
     mean = np.empty(len(z))
     std = np.empty(len(z))
-    xyh = np.column_stack([xy, np.ones(n)])
+    if warp == "homography":  # one fused compiled pass per plane (mitpiv.reconstruct._kernels)
+        from mitpiv.reconstruct._kernels import kernels
+
+        fused = kernels()["refocus_homography"]
+        flat = np.concatenate([im.ravel() for im in imgs])
+        offs = np.cumsum([0] + [im.size for im in imgs[:-1]]).astype(np.int64)
+        hs = np.array([im.shape[0] for im in imgs], np.int64)
+        ws = np.array([im.shape[1] for im in imgs], np.int64)
+        xs, ys = np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1])
+        raw = np.empty(n)
     for k in track(range(len(z)), desc="refocus: planes", progress=progress, unit="plane"):
-        acc = np.zeros(n)
-        cnt = np.zeros(n)
-        pts = None
-        for im, m in zip(imgs, mappings, strict=True):
-            if warp == "homography":
-                q = xyh @ plane_homography(m, z[k]).T
-                uv = q[:, :2] / q[:, 2:3]
-            else:
-                if pts is None:
-                    pts = np.column_stack([xy, np.full(n, z[k])])
+        if warp == "homography":
+            hom = np.stack([plane_homography(m, z[k]) for m in mappings]).astype(np.float64)
+            fused(flat, offs, hs, ws, hom, xs, ys, raw)
+        else:
+            acc = np.zeros(n)
+            cnt = np.zeros(n)
+            pts = np.column_stack([xy, np.full(n, z[k])])
+            for im, m in zip(imgs, mappings, strict=True):
                 uv = m.project(pts)
-            h, w = im.shape
-            inside = (uv[:, 0] >= 0) & (uv[:, 0] <= w) & (uv[:, 1] >= 0) & (uv[:, 1] <= h)
-            acc += ndimage.map_coordinates(im, [uv[:, 1] - 0.5, uv[:, 0] - 0.5], order=1, mode="constant", cval=0.0)
-            cnt += inside
-        raw = np.where(cnt > 0, acc / np.maximum(cnt, 1), 0.0)
+                h, w = im.shape
+                inside = (uv[:, 0] >= 0) & (uv[:, 0] <= w) & (uv[:, 1] >= 0) & (uv[:, 1] <= h)
+                acc += ndimage.map_coordinates(im, [uv[:, 1] - 0.5, uv[:, 0] - 0.5], order=1, mode="constant",
+                                               cval=0.0)
+                cnt += inside
+            raw = np.where(cnt > 0, acc / np.maximum(cnt, 1), 0.0)
         mu[k], sigma[k] = noise_normal_fit(raw)
         peak[k] = raw.max()
         mean[k], std[k] = raw.mean(), raw.std()
