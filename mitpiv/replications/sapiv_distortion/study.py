@@ -186,6 +186,13 @@ def _stat(res: dict, q: str, reading: str | None = None) -> float:
     return math.nan if v is None else float(v)
 
 
+def _show(v) -> str:
+    """A row's value for prose: text as it is, a number to 4 digits, None as 'no finite value'."""
+    if v is None:
+        return "no finite value"
+    return v if isinstance(v, str) else f"{v:.4g}"
+
+
 def _ci_text(x) -> str:
     from mitpiv.replications.frame import interval
 
@@ -252,19 +259,23 @@ def run(ctx) -> ReplicationResult:
         """Per seed: c's quantity over (or minus) the reference configuration's (same particles)."""
         ref = ref or cfg()
         a, b = val(c, q, rho, reading), val(ref, q, rho, reading)
-        return [x / y if op == "ratio" else y - x for x, y in zip(a, b, strict=True)]
+        # a reference of 0 (a field with no particle in the patches) has no ratio: NaN, which the
+        # row reports as a realisation without a finite value
+        return [(x / y if y else math.nan) if op == "ratio" else y - x for x, y in zip(a, b, strict=True)]
 
     def over_dens(fn, agg):
         """Per seed, ``agg`` (min or max) over the densities of ``fn(rho)`` (per-seed lists)."""
         cols = [fn(rho) for rho in dens]
-        return [agg(col[i] for col in cols) for i in range(len(cols[0]))]
+        per = [[col[i] for col in cols] for i in range(len(cols[0]))]
+        return [agg(v) if all(math.isfinite(x) for x in v) else math.nan for v in per]
 
     def mean_curve(c, q, reading=None):
         return [float(np.nanmean(val(c, q, rho, reading))) for rho in dens]
 
     def nsnr(c, rho, ref=None):
         ref = ref or cfg()
-        return [normalised_snr(a, b) for a, b in zip(val(c, "SNR", rho), val(ref, "SNR", rho), strict=True)]
+        return [normalised_snr(a, b) if b > 0 and math.isfinite(a) else math.nan
+                for a, b in zip(val(c, "SNR", rho), val(ref, "SNR", rho), strict=True)]
 
     # ------------------------------------------------------------------ curves (means over the seeds)
     A3 = [d for d in sc["d_levels"]]
@@ -507,6 +518,7 @@ def run(ctx) -> ReplicationResult:
                 ax.plot(c.x, ys, "o-", label=lab)
         if key.startswith("Q_vs_density"):
             ax.axhline(0.75, color="k", ls="--", lw=0.8, label="paper: adequacy Q = 0.75")
+            ax.set_ylim(0.0, 1.0)  # Q of non-negative volumes; an interval beyond is clipped
         if key.startswith("Qprime"):
             ax.axhline(0.97, color="k", ls="--", lw=0.8, label="paper: all > 0.97")
         ax.set_xlabel(c.x_label)
@@ -616,11 +628,11 @@ def _sections(ctx, sc: dict, ns: dict) -> list[str]:
         "The pinhole calibration's mapping error (RMS distance between the true projection and the fitted pinhole's "
         "over 4096 points in the volume, worst of the 25 cameras) per distortion; the thesis ties Q = 0.75 to 0.45 px "
         "(citing Belden et al.):\n\n| D | mapping error, eq. A.3 [px] | r^2 law [px] |\n|---|---|---|\n"
-        + "\n".join(f"| {d} % | {ns['map_err'].get(('A.3', d), math.nan):.3f} | "
-                    f"{ns['map_err'].get(('T3.1', d), math.nan):.3f} |" for d in sc["d_levels"]) + "\n\n"
+        + "\n".join(f"| {d} % | " + " | ".join(f"{ns['map_err'][(law, d)]:.3f}" if (law, d) in ns["map_err"] else "-"
+                                          for law in ("A.3", "T3.1")) + " |" for d in sc["d_levels"]) + "\n\n"
         "A pinhole absorbs part of a radial distortion (a focal length and a tilt mimic its low orders).",
         "## Disagreements and inconclusive rows\n\n"
-        + ("\n".join(f"- `{r.id}` ({r.verdict}): ours {r.ours if isinstance(r.ours, str) else f'{r.ours:.4g}'}"
+        + ("\n".join(f"- `{r.id}` ({r.verdict}): ours {_show(r.ours)}"
                      + (f" [{r.ci[0]:.4g}, {r.ci[1]:.4g}]" if r.ci else "") + f" against the paper's {r.paper}"
                      + (f" ({r.tolerance})" if r.tolerance else "") + "." for r in bad) if bad else "None.")
         + "\n\n" + DISAGREEMENT_CAUSES,
