@@ -42,7 +42,10 @@ def test_quick_run_schema_and_ids(tmp_path):
     assert rows["Q_D2_rel"]["ours"] < 1.0  # 2 % distortion costs Q (the study's headline)
     # every physics row with realisations has its interval over the particle fields
     assert all(r["n"] == 2 and r["ci"] is not None for r in res["rows"]
-               if r["id"].startswith(("Q_D", "nSNR", "sigma_D")) and not r["id"].endswith("_brown"))
+               if r["id"].startswith(("Q_D", "nSNR", "sigma_D")) and not r["id"].endswith(("_brown", "_pb")))
+    # the physically based arm: one rendered field per point in --quick
+    pb = [r for r in res["rows"] if r["arm"] == "physical"]
+    assert pb and all(r["id"].endswith("_pb") and r["n"] == 1 for r in pb)
     assert rows["Q_SA0.1_paperpsf"]["kind"] == "input" and rows["mapping_px_D2"]["kind"] == "info"
     assert set(res["curves"]["Q_vs_density_threshold_k"]["y"]) == {"k0", "k1", "k2", "k3", "k5", "k8"}
     md = (tmp_path / "report.md").read_text()
@@ -305,7 +308,10 @@ def test_committed_rows_take_the_declared_kinds():
     assert STUDY.kinds is KINDS and STUDY.inputs_from_paper is INPUTS_FROM_PAPER
     assert unused_kinds(STUDY, rows) == []
     assert out["shift_D2_rn1"].kind == "definition"
-    assert out["Q_D1"].kind != "physics" and out["Q_D2"].kind != "physics"
+    # the first pass's vacuous Q_D1 / Q_D2 < 0.75 rows are gone: the losses are compared relative to D0
+    assert "Q_D1" not in out and out["Q_D2_rel"].kind == "physics" and out["Q_D2_rel_pb"].arm == "physical"
+    assert out["mapping_px_D2"].kind == "info" and out["Q_D2_brown"].kind == "info"
+    assert out["Q_D0"].n == 5 and out["Q_D0"].ci is not None  # intervals over the particle fields
     assert out["Q_SA0.1_paperpsf"].kind == "input" and set(out["Q_SA0.1_paperpsf"].reads) <= set(INPUTS_FROM_PAPER)
-    assert not [i for i, r in out.items() if r.kind == "physics" and r.agrees is None]
+    assert not [i for i, r in out.items() if r.kind == "physics" and r.verdict == "not compared"]
     assert all(r.why.strip() for r in out.values() if r.kind != "physics")
