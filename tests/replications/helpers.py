@@ -14,9 +14,13 @@ def assert_second_edition(res: dict, out: Path) -> None:
     rows = res["rows"]
     assert rows and all(r["kind"] in KINDS and r["verdict"] in VERDICTS and r["arm"] in ARMS for r in rows)
     assert all(r["n"] >= 1 and (r["ci"] is None or r["ci"][0] <= r["ci"][1]) for r in rows)
-    phys = [r for r in rows if r["kind"] == "physics"]
-    assert not [r["id"] for r in phys if r["verdict"] == "not compared" or r["reads"]]
+    phys_all = [r for r in rows if r["kind"] == "physics"]
+    assert not [r["id"] for r in phys_all if r["verdict"] == "not compared" or r["reads"]]
     assert len(res["code_hash"]) == 16 and res["points_computed"] + res["points_cached"] > 0
+    for arm in {r["arm"] for r in phys_all} - {"paper-model"}:  # each other arm has its own tally
+        own = [r for r in phys_all if r["arm"] == arm]
+        assert res["tally"][arm]["n"] == len(own)
+    phys = [r for r in phys_all if r["arm"] == "paper-model"]
     t = res["tally"]["paper-model"]
     assert t["n"] == len(phys) and t["agree"] == sum(r["verdict"] == "agrees" for r in phys)
     first = (out / "report.md").read_text().splitlines()[0]

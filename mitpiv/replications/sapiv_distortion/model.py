@@ -43,8 +43,12 @@ from mitpiv.grid import VoxelGrid
 from mitpiv.physics.camera import PinholeCamera, planar_array
 from mitpiv.physics.distortion import Distortion, percent_to_k1
 
-__all__ = ["SapivSystem", "locate_dots", "render_dot_windows", "calibrate_from_targets", "evaluate_point",
-           "patch_centres"]
+__all__ = ["SapivSystem", "PercentWarpCamera", "locate_dots", "render_dot_windows", "calibrate_from_targets",
+           "evaluate_point", "seed_field", "score_images", "patch_centres", "mapping_error", "LAWS", "READINGS"]
+
+#: the distortion laws: eq. A.3 (shift p/100 r_n^3 r_max, the thesis's equations; a Brown-Conrady
+#: k1 of the true camera) and Table 3.1's columns (shift p/100 r_n^2 r_max, a pixel warp)
+LAWS = ("A.3", "T3.1")
 
 log = logging.getLogger(__name__)
 
@@ -86,9 +90,16 @@ class SapivSystem:
         h = self.volume_mm[2] / 2
         return np.linspace(-h, h, self.n_planes)
 
-    def cameras(self, distortion_percent: float = 0.0) -> list[PinholeCamera]:
+    def cameras(self, distortion_percent: float = 0.0, law: str = "A.3") -> list:
         """The 25 true cameras (row-major from the top-left), with the percent distortion
-        of appendix A (``K1 = -p / (100 r_max^2)``, r_max the corner radius) on each."""
+        of appendix A on each: ``law`` "A.3" is eq. A.3 with A.8 (``K1 = -p / (100 r_max^2)``,
+        r_max the corner radius: a :class:`PinholeCamera` with that k1, as the
+        ``distorted_pinhole`` sensor renders it), "T3.1" the law of Table 3.1's columns
+        (a radial shift ``p/100 r_n^2 r_max``: :class:`PercentWarpCamera`)."""
+        if law not in LAWS:
+            raise ConfigError(f"SapivSystem.cameras: 'law' must be one of {LAWS}, got {law!r}.")
+        if law == "T3.1" and distortion_percent:
+            return [PercentWarpCamera(c, distortion_percent, exponent=2) for c in self.cameras(0.0)]
         res = (self.resolution, self.resolution)
         arr = planar_array(self.rows, self.cols, spacing_mm=self.spacing_mm, distance_mm=self.object_distance_mm)
         probe = PinholeCamera(res, self.image_distance_mm, self.pixel_pitch_um)
@@ -122,6 +133,55 @@ class SapivSystem:
         xx, yy = np.meshgrid(gx, gy)
         return np.concatenate([np.column_stack([xx.ravel(), yy.ravel(), np.full(xx.size, z)])
                                for z in self.target_depths_mm])
+
+
+class PercentWarpCamera:
+    """A distortion-free pinhole camera whose image is warped radially about the principal
+    point by the percent law with the shift ``p/100 r_n^m r_max`` (``r_n = r_u / r_max``,
+    ``r_max`` the corner radius in pixels; positive p inwards, barrel):
+    ``r_d = r_u (1 - p/100 r_n^(m-1))``. ``m = 3`` is eq. A.3 (the same map as a k1 of
+    :class:`PinholeCamera`, tested), ``m = 2`` the law Table 3.1's columns follow. The
+    thesis warps its images the same way, in pixels after the pinhole projection.
+    Provides what the study uses of a camera: ``project``, ``jacobian``, ``resolution``,
+    ``pixel_pitch_um``."""
+
+    def __init__(self, base: PinholeCamera, percent: float, *, exponent: int = 2):
+        if not base.distortion.is_zero:
+            raise ConfigError("PercentWarpCamera: the base camera must be distortion-free (the warp is the distortion).")
+        if exponent < 1:
+            raise ConfigError(f"PercentWarpCamera: 'exponent' must be >= 1, got {exponent!r}.")
+        self.base, self.percent, self.exponent = base, float(percent), int(exponent)
+        self.resolution, self.pixel_pitch_um = base.resolution, base.pixel_pitch_um
+        self.r_max_px = base.corner_radius * base.focal_px
+
+    def _warp(self, uv):
+        c = np.asarray(self.base.principal_point_px)
+        d = uv - c
+        r = np.hypot(d[..., 0], d[..., 1])
+        s = 1.0 - self.percent / 100.0 * (r / self.r_max_px) ** (self.exponent - 1)
+        return c, d, r, s
+
+    def project(self, p_world_mm) -> np.ndarray:
+        c, d, _, s = self._warp(self.base.project(p_world_mm))
+        return c + d * s[..., None]
+
+    def jacobian(self, p_world_mm) -> np.ndarray:
+        """``d(u, v)/d(x, y, z)`` [px/mm]: the warp's Jacobian ``s I + d (grad s)^T`` times the pinhole's."""
+        _, d, r, s = self._warp(self.base.project(p_world_mm))
+        m = self.exponent
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = -self.percent / 100.0 * (m - 1) * r ** (m - 2) / self.r_max_px ** (m - 1)  # ds/dr
+            unit = np.where(r[..., None] > 0, d / r[..., None], 0.0)
+        w = s[..., None, None] * np.eye(2) + (d[..., :, None] * (g[..., None] * unit)[..., None, :])
+        return w @ self.base.jacobian(p_world_mm)
+
+
+def mapping_error(system: SapivSystem, cameras, mappings, *, n: int = 4096, seed: int = 0) -> list[float]:
+    """RMS distance [px] between each camera's true projection and its calibrated mapping's,
+    over ``n`` points uniform in the volume (the thesis ties Q = 0.75 to 0.45 px of mapping
+    error, citing Belden et al.)."""
+    p = np.random.default_rng(seed).uniform(-np.asarray(system.volume_mm) / 2, np.asarray(system.volume_mm) / 2, (n, 3))
+    return [float(np.sqrt(np.mean(np.sum((c.project(p) - m.project(p)) ** 2, axis=1)))) for c, m in zip(cameras, mappings, strict=True)]
 
 
 # ---------------------------------------------------------------------- targets and calibration
@@ -210,6 +270,20 @@ THRESHOLD_K = 3.0
 #: thresholds of the density-trend diagnosis: mu + k sigma (0: none) and fixed intensities
 DIAGNOSIS_K = (0.0, 1.0, 2.0, 3.0, 5.0, 8.0)
 DIAGNOSIS_ABS = (0.02, 0.05, 0.1, 0.2)
+#: the readings of the thesis's threshold and true volume scored on every point:
+#: threshold "plane" = mean + 3 std of each whole plane (a normal distribution fitted to the
+#: plane's intensities by maximum likelihood, what MATLAB's normfit returns), "fit" = mean +
+#: 3 sigma of a normal fitted to the noise part of the histogram only (Fig. 2-10's picture);
+#: truth "sphere" = each 20 um particle voxelised by the fraction of its volume in each
+#: 50 um voxel, "point" = its intensity in the voxel holding its centre, "blob" = a Gaussian
+#: of 0.7 voxel (the tomographic-PIV convention)
+THRESHOLDS = ("plane", "fit")
+TRUTHS = ("sphere", "point", "blob")
+READINGS = tuple(f"{t}/{v}" for t in THRESHOLDS for v in TRUTHS)
+#: the reading the study's rows use, chosen for its literalness (see the report): the
+#: thesis fits "a Gaussian normal distribution to the normalized intensity distribution" of
+#: each plane and voxelises particles "with a diameter of 20 um" on 1/8000 mm^3 voxels
+ADOPTED = "plane/sphere"
 
 
 def _threshold(raw, mu, sigma, k: float):
@@ -225,42 +299,51 @@ def patch_centres(n_side: int, pitch_mm: float) -> list[tuple[float, float]]:
 
 
 def evaluate_point(system: SapivSystem, cameras, mappings, table, *, density_per_mm3: float, seed: int,
-                   patches, patch_mm: float, warp: str = "homography", threshold_diagnosis: bool = False,
-                   progress=None) -> dict:
+                   patches, patch_mm: float, warp: str = "homography", progress=None) -> dict:
     """Seed, image, refocus, threshold and score one configuration at one density.
 
     Particles are seeded uniformly in the whole volume (a Poisson number for
     ``density_per_mm3``); those within the largest parallax
     (:meth:`SapivSystem.max_parallax_mm`) of a patch are imaged by every camera
     (the true cameras: distortion; ``table``: the aberration), refocused on the patches'
-    voxels (0.05 mm, 201 planes) through ``mappings`` (the calibration), thresholded at mu +
-    3 sigma of the noise fit per plane, and compared with the true volume.
+    voxels (0.05 mm, 201 planes) through ``mappings`` (the calibration), thresholded per
+    plane at mean + 3 std under each threshold reading and compared with each true volume
+    (:data:`READINGS`).
 
-    Returns a dict: Q (eq. 4.1), Qprime (eq. 4.2) against Gaussian blobs of
-    ``truth_sigma_voxels``, Q_point and Qprime_point against the voxel-occupancy truth, SNR (eq. 4.3), mu / sigma (means over the
-    planes of the normal fit to the noise part), mu_all / sigma_all (of the whole planes), particles, voxels and wall times [s].
-
-    With ``threshold_diagnosis`` the raw planes are kept and Q is also returned for other
-    thresholds (the metrics above are unchanged up to float32 rounding at the threshold): ``Q_by_k`` (threshold mu + k sigma per
-    plane, k = 0 meaning no threshold) and ``Q_by_abs`` (one fixed threshold in image
-    intensity for all planes and densities; a particle's energy is 1, so the in-focus peak
-    does not depend on the density while mu + 3 sigma does).
+    Returns a dict with, for the adopted reading (:data:`ADOPTED`): Q (eq. 4.1), Qprime
+    (eq. 4.2), SNR (eq. 4.3) with that reading's mean and std, mu / sigma (their means over
+    the planes), kept_fraction, Q_patch (Q of each patch alone); ``readings``: Q, Qprime,
+    kept_fraction of every reading (and SNR, mu, sigma per threshold); mu_fit / sigma_fit
+    and mu_all / sigma_all (the two thresholds' statistics); Q_by_k / Q_by_abs (the density
+    diagnosis: mu + k sigma of the noise fit, k = 0 meaning no threshold, and fixed
+    intensity thresholds, against the blob truth); particles, voxels and wall times [s].
     """
-    from mitpiv.analysis.quality import occupancy_volume, quality_q, rank_correlation, snr_from_fits, truth_volume
     from mitpiv.imaging import splat_points
-    from mitpiv.reconstruct.sapiv import refocus_planes
 
-    if density_per_mm3 <= 0:
-        raise ConfigError(f"evaluate_point: density_per_mm3 must be > 0, got {density_per_mm3!r}.")
     t0 = time.perf_counter()
     c0 = time.process_time()
+    field = seed_field(system, density_per_mm3=density_per_mm3, seed=seed, patches=patches, patch_mm=patch_mm)
+    res = (system.resolution, system.resolution)
+    imgs = [splat_points(cam.project(field["imaged"]), res, table) for cam in cameras]
+    out = score_images(system, imgs, mappings, field, warp=warp, progress=progress)
+    out["t_render_s"] = time.perf_counter() - t0 - out["t_refocus_s"] - out["t_metrics_s"]
+    out["t_total_s"] = time.perf_counter() - t0
+    out["cpu_s"] = time.process_time() - c0
+    return out
+
+
+def seed_field(system: SapivSystem, *, density_per_mm3: float, seed: int, patches, patch_mm: float) -> dict:
+    """The particle field of one point and the patches' voxels: particles seeded uniformly in
+    the whole volume (a Poisson number for ``density_per_mm3``); ``imaged``: those within the
+    largest parallax (:meth:`SapivSystem.max_parallax_mm`) of a patch, whose light can reach
+    it; per patch its VoxelGrid, the particles inside it (``parts``) and its voxels' x, y."""
+    if density_per_mm3 <= 0:
+        raise ConfigError(f"evaluate_point: density_per_mm3 must be > 0, got {density_per_mm3!r}.")
     rng = np.random.default_rng(seed)
     vx = system.voxel_mm
     n_side = int(round(patch_mm / vx))
     margin = system.max_parallax_mm() + 0.5
     hz = system.volume_mm[2] / 2
-    # seed the whole volume at the paper's density (a Poisson count), keep the particles
-    # whose light can reach a patch (inside a patch's column widened by the parallax)
     vol = np.asarray(system.volume_mm, dtype=float)
     n = rng.poisson(density_per_mm3 * np.prod(vol))
     p_all = rng.uniform(-vol / 2, vol / 2, size=(n, 3))
@@ -276,53 +359,68 @@ def evaluate_point(system: SapivSystem, cameras, mappings, table, *, density_per
         ys = g.origin_mm[1] + (np.arange(n_side) + 0.5) * vx
         xx, yy = np.meshgrid(xs, ys)
         xy.append(np.column_stack([xx.ravel(), yy.ravel()]))
-    p = p_all[keep]
-    res = (system.resolution, system.resolution)
-    imgs = []
-    for cam in cameras:
-        uv = cam.project(p)
-        imgs.append(splat_points(uv, res, table))
-    t_render = time.perf_counter() - t0
-    rf = refocus_planes(imgs, mappings, np.concatenate(xy), system.z_planes_mm, warp=warp, progress=progress,
-                        threshold_k=None if threshold_diagnosis else THRESHOLD_K)
-    raw = None
-    if threshold_diagnosis:  # the same thresholded planes refocus_planes would return, raw kept aside
-        raw = rf.planes
-        rf.planes = _threshold(raw, rf.mu, rf.sigma, THRESHOLD_K)
-    t_refocus = time.perf_counter() - t0 - t_render
-    # the true volume, patch by patch, in the same voxel order as the refocused points
-    occ, blob = [], []
-    for g, pp in zip(grids, parts, strict=True):
-        occ.append(occupancy_volume(pp, g).reshape(system.n_planes, -1))
-        blob.append(truth_volume(pp, g, system.truth_sigma_voxels).reshape(system.n_planes, -1))
-    vs = np.concatenate(occ, axis=1)  # points
-    vb = np.concatenate(blob, axis=1)  # blobs
-    del occ, blob
-    vr = rf.planes
+    return {"imaged": p_all[keep], "grids": grids, "parts": parts, "xy": np.concatenate(xy), "n_side": n_side}
+
+
+def score_images(system: SapivSystem, imgs, mappings, field: dict, *, warp: str = "homography", progress=None) -> dict:
+    """Refocus ``imgs`` (one per camera, in the order of ``mappings``) on the patches of
+    ``field`` (:func:`seed_field`), threshold under each reading and score against each
+    true volume: the dict :func:`evaluate_point` describes (without its render time)."""
+    from mitpiv.analysis.quality import (
+        occupancy_volume,
+        quality_q,
+        rank_correlation,
+        snr_from_fits,
+        sphere_volume,
+        truth_volume,
+    )
+    from mitpiv.reconstruct.sapiv import refocus_planes
+
+    t0 = time.perf_counter()
+    grids, parts, n_side, p = field["grids"], field["parts"], field["n_side"], field["imaged"]
+    rf = refocus_planes(imgs, mappings, field["xy"], system.z_planes_mm, warp=warp, progress=progress,
+                        threshold_k=None)
+    raw = rf.planes
+    stats = {"plane": (rf.mean, rf.std), "fit": (rf.mu, rf.sigma)}
+    vols = {t: _threshold(raw, *stats[t], THRESHOLD_K) for t in THRESHOLDS}
+    t_refocus = time.perf_counter() - t0
+    # the true volumes, patch by patch, in the same voxel order as the refocused points
+    maker = {"sphere": lambda pp, g: sphere_volume(pp, g, system.particle_diameter_um * 1e-3),
+             "point": occupancy_volume,
+             "blob": lambda pp, g: truth_volume(pp, g, system.truth_sigma_voxels)}
+    truths = {v: np.concatenate([maker[v](pp, g).reshape(system.n_planes, -1) for g, pp in zip(grids, parts, strict=True)],
+                                axis=1) for v in TRUTHS}
     t_m = time.perf_counter()
+    readings = {}
+    for t in THRESHOLDS:
+        for v in TRUTHS:
+            readings[f"{t}/{v}"] = {"Q": quality_q(vols[t], truths[v]), "Qprime": rank_correlation(vols[t], truths[v])}
+        readings[t] = {"SNR": snr_from_fits(rf.peak, *stats[t]), "mu": float(np.mean(stats[t][0])),
+                       "sigma": float(np.mean(stats[t][1])), "kept_fraction": float(np.mean(vols[t] > 0))}
+    t_a, v_a = ADOPTED.split("/")
+    npp = n_side * n_side
     out = {
-        "Q": quality_q(vr, vb),
-        "Qprime": rank_correlation(vr, vb),
-        "Q_point": quality_q(vr, vs),
-        "Qprime_point": rank_correlation(vr, vs),
-        "SNR": snr_from_fits(rf.peak, rf.mu, rf.sigma),
-        "mu": float(np.mean(rf.mu)),
-        "sigma": float(np.mean(rf.sigma)),
+        "Q": readings[ADOPTED]["Q"],
+        "Qprime": readings[ADOPTED]["Qprime"],
+        "SNR": readings[t_a]["SNR"],
+        "mu": readings[t_a]["mu"],
+        "sigma": readings[t_a]["sigma"],
+        "kept_fraction": readings[t_a]["kept_fraction"],
+        "Q_patch": [quality_q(vols[t_a][:, i * npp:(i + 1) * npp], truths[v_a][:, i * npp:(i + 1) * npp])
+                    for i in range(len(grids))],
+        "readings": readings,
+        "mu_fit": float(np.mean(rf.mu)),
+        "sigma_fit": float(np.mean(rf.sigma)),
         "mu_all": float(np.mean(rf.mean)),
         "sigma_all": float(np.mean(rf.std)),
+        "Q_by_k": {f"{k:g}": quality_q(raw if k == 0 else _threshold(raw, rf.mu, rf.sigma, k), truths["blob"])
+                   for k in DIAGNOSIS_K},
+        "Q_by_abs": {f"{t:g}": quality_q(np.where(raw > t, raw, 0.0), truths["blob"]) for t in DIAGNOSIS_ABS},
+        "threshold_k3_mean": float(np.mean(rf.mu + THRESHOLD_K * rf.sigma)),
+        "raw_peak_mean": float(np.mean(rf.peak)),
         "particles": int(len(p)),
-        "voxels": int(vr.size),
-        "kept_fraction": float(np.mean(vr > 0)),
-        "t_render_s": t_render,
+        "voxels": int(raw.size),
         "t_refocus_s": t_refocus,
         "t_metrics_s": time.perf_counter() - t_m,
     }
-    if raw is not None:
-        out["Q_by_k"] = {f"{k:g}": quality_q(raw if k == 0 else _threshold(raw, rf.mu, rf.sigma, k), vb)
-                         for k in DIAGNOSIS_K}
-        out["Q_by_abs"] = {f"{t:g}": quality_q(np.where(raw > t, raw, 0.0), vb) for t in DIAGNOSIS_ABS}
-        out["threshold_k3_mean"] = float(np.mean(rf.mu + THRESHOLD_K * rf.sigma))
-        out["raw_peak_mean"] = float(np.mean(rf.peak))
-    out["t_total_s"] = time.perf_counter() - t0
-    out["cpu_s"] = time.process_time() - c0
     return out
