@@ -46,6 +46,21 @@ def test_quick_run_schema_and_ids(tmp_path):
     # the physically based arm: one rendered field per point in --quick
     pb = [r for r in res["rows"] if r["arm"] == "physical"]
     assert pb and all(r["id"].endswith("_pb") and r["n"] == 1 for r in pb)
+    # ... recorded by the experiment's sensor: one exposure for the set, the brightest pixel at
+    # peak_photons (20000 photons x QE 0.5 / 3 e- per count = 3333 counts; shot noise 33 counts),
+    # each camera's counts through its own pupil; the same render also scored before the sensor
+    import json
+
+    from mitpiv.replications.sapiv_distortion.physical import SENSOR
+
+    pt = json.loads(next((tmp_path / "work" / "cache").glob("pt_D0_SA0_none_mitsubapsf_*.json")).read_text())["result"]
+    info = pt["sensor"]
+    top = SENSOR.peak_photons * SENSOR.quantum_efficiency / SENSOR.gain_e_per_count
+    assert info["photometry"] == "aperture" and info["saturated_fraction"] == 0.0
+    assert 0.9 * top < max(info["peak_counts"]) < 1.1 * top
+    # the Mie phase function: the backward cameras' brightest pixel is a few % of the forward ones'
+    assert min(info["peak_counts"]) < 0.2 * max(info["peak_counts"])
+    assert set(pt["no_sensor"]) >= {"Q", "Qprime", "SNR", "readings"} and 0 < pt["no_sensor"]["Q"] <= 1
     assert rows["Q_SA0.1_paperpsf"]["kind"] == "input" and rows["mapping_px_D2"]["kind"] == "info"
     assert set(res["curves"]["Q_vs_density_threshold_k"]["y"]) == {"k0", "k1", "k2", "k3", "k5", "k8"}
     md = (tmp_path / "report.md").read_text()
@@ -315,3 +330,28 @@ def test_committed_rows_take_the_declared_kinds():
     assert out["Q_SA0.1_paperpsf"].kind == "input" and set(out["Q_SA0.1_paperpsf"].reads) <= set(INPUTS_FROM_PAPER)
     assert not [i for i, r in out.items() if r.kind == "physics" and r.verdict == "not compared"]
     assert all(r.why.strip() for r in out.values() if r.kind != "physics")
+
+
+def test_the_physical_arm_records_through_the_experiment_s_sensor():
+    """The rendered arm's sensor is the ``[sensor]`` table of scenes/sapiv_paper/experiment.toml
+    (one source), a real camera's: photon and read noise, 12 bits; the counts follow each
+    camera's rendered light with one exposure for the set (a camera 4 x brighter records 4 x
+    the counts, not its own full range)."""
+    import tomllib
+
+    from mitpiv.imaging import SensorModel
+    from mitpiv.replications.sapiv_distortion.physical import SCENE, SENSOR, sensor_counts
+
+    table = tomllib.loads(SCENE.with_name("experiment.toml").read_text())["sensor"]
+    assert SENSOR == SensorModel(**table)
+    assert SENSOR.shot_noise and SENSOR.read_noise_e > 0 and SENSOR.bit_depth == 12
+    rng = np.random.default_rng(1)
+    base = np.zeros((64, 64))
+    base[rng.integers(0, 64, 40), rng.integers(0, 64, 40)] = 1.0
+    counts, info = sensor_counts([base, 4 * base], ["a", "b"], [None, None], seed=3,
+                                 model=SensorModel(**{**table, "photometry": "image"}))
+    top = SENSOR.peak_photons * SENSOR.quantum_efficiency / SENSOR.gain_e_per_count
+    on = base > 0
+    assert info["photometry"] == "image" and counts[0].dtype == np.float64
+    assert np.mean(counts[1][on]) == pytest.approx(top, rel=0.02)  # 40 pixels of sd 33 counts: 0.3 %
+    assert np.mean(counts[0][on]) == pytest.approx(top / 4, rel=0.03)

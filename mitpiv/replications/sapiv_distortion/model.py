@@ -411,6 +411,11 @@ def score_images(system: SapivSystem, imgs, mappings, field: dict, *, warp: str 
         "kept_fraction": readings[t_a]["kept_fraction"],
         "Q_patch": [quality_q(vols[t_a][:, i * npp:(i + 1) * npp], truths[v_a][:, i * npp:(i + 1) * npp])
                     for i in range(len(grids))],
+        # each patch's own refocused background and what the union's per-plane threshold keeps of
+        # it (the threshold is one per plane over the union of the patches)
+        "mu_patch": [float(np.mean(raw[:, i * npp:(i + 1) * npp])) for i in range(len(grids))],
+        "kept_patch": [float(np.mean(vols[t_a][:, i * npp:(i + 1) * npp] > 0)) for i in range(len(grids))],
+        "particles_patch": [int(len(pp)) for pp in parts],
         "readings": readings,
         "mu_fit": float(np.mean(rf.mu)),
         "sigma_fit": float(np.mean(rf.sigma)),

@@ -19,6 +19,7 @@ sensor renders, so this arm runs eq. A.3 only.
 
 from __future__ import annotations
 
+import math
 import shutil
 import tempfile
 import time
@@ -28,9 +29,26 @@ import numpy as np
 
 from mitpiv.errors import ConfigError
 
-__all__ = ["SCENE", "render_field", "physical_point"]
+__all__ = ["SCENE", "SENSOR", "render_field", "physical_point", "sensor_counts"]
 
 SCENE = Path(__file__).resolve().parents[3] / "scenes" / "sapiv_paper" / "scene.xml"
+
+
+def _sensor_model():
+    import tomllib
+
+    from mitpiv.imaging import SensorModel
+
+    path = SCENE.with_name("experiment.toml")
+    table = tomllib.loads(path.read_text()).get("sensor")
+    if not table:
+        raise ConfigError(f"sapiv physical arm: {path} has no [sensor] table; the rendered arm records counts "
+                          "through the experiment's sensor model.")
+    return SensorModel(**table)
+
+
+#: the sensor model of ``scenes/sapiv_paper/experiment.toml`` (its ``[sensor]`` table)
+SENSOR = _sensor_model()
 #: radius of the particles' proxy spheres in the PLY [mm] (hit only by stray rays; a pinhole
 #: camera's particle light is traced from the particle, not found by intersection)
 PROXY_RADIUS_MM = 0.01
@@ -58,9 +76,10 @@ def render_field(system, cameras, positions_mm, *, distortion_percent: float, sp
                  seed: int) -> tuple[list[np.ndarray], dict]:
     """Render ``positions_mm`` (20 um particles) through the 25 sensors of :data:`SCENE` with
     the given distortion and aberration; returns the images in the order of ``cameras`` and
-    the timings [s]."""
+    a dict of the timings [s] and the sensors' ids and camera records (``ids``, ``records``,
+    same order)."""
     from mitpiv.io.particles import write_particles_ply
-    from mitpiv.render.render import render_sensor
+    from mitpiv.render.render import render_sensor, sensor_model
     from mitpiv.render.scene import load_scene
 
     t0 = time.perf_counter()
@@ -77,9 +96,30 @@ def render_field(system, cameras, positions_mm, *, distortion_percent: float, sp
         sensors = list(scene.sensors())
         order = _match(sensors, cameras)
         imgs = [render_sensor(scene, sensors[i], seed=seed, frame=0) for i in order]
+        ids = [sensors[i].id() for i in order]
+        records = [sensor_model(sensors[i]) for i in order]
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return imgs, {"t_load_s": t_load, "t_render_s": time.perf_counter() - t0 - t_load}
+    return imgs, {"t_load_s": t_load, "t_render_s": time.perf_counter() - t0 - t_load, "ids": ids,
+                  "records": records}
+
+
+def sensor_counts(imgs, ids, records, *, seed: int, model=None) -> tuple[list[np.ndarray], dict]:
+    """The counts the cameras record of the rendered ``imgs`` (one set: one exposure for all,
+    :func:`mitpiv.imaging.apply_sensor_set` with each sensor's record for aperture
+    photometry), as float64 in the same order, and what they were taken with."""
+    from mitpiv.imaging import apply_sensor_set
+
+    model = SENSOR if model is None else model
+    res = apply_sensor_set({(i, 0): im for i, im in zip(ids, imgs, strict=True)}, model, seed=seed,
+                           cameras=dict(zip(ids, records, strict=True)), on_degenerate="raise")
+    counts = [res.counts[(i, 0)].astype(np.float64) for i in ids]
+    top = 2 ** model.bit_depth - 1 if model.bit_depth else math.inf
+    info = {"photometry": res.photometry, "exposure": res.exposure,
+            "peak_counts": [float(c.max()) for c in counts],
+            "mean_counts": [float(c.mean()) for c in counts],
+            "saturated_fraction": float(np.mean([np.mean(c >= top) for c in counts]))}
+    return counts, info
 
 
 def physical_point(system, cameras, mappings, *, distortion_percent: float, spherical_waves: float,
@@ -94,8 +134,16 @@ def physical_point(system, cameras, mappings, *, distortion_percent: float, sphe
     field = seed_field(system, density_per_mm3=density_per_mm3, seed=seed, patches=patches, patch_mm=patch_mm)
     imgs, t = render_field(system, cameras, field["imaged"], distortion_percent=distortion_percent,
                            spherical_waves=spherical_waves, seed=seed)
-    out = score_images(system, imgs, mappings, field)
+    t1 = time.perf_counter()
+    counts, info = sensor_counts(imgs, t.pop("ids"), t.pop("records"), seed=seed)
+    t_sensor = time.perf_counter() - t1
+    out = score_images(system, counts, mappings, field)
+    bare = score_images(system, imgs, mappings, field)
+    out["no_sensor"] = {k: bare[k] for k in ("Q", "Qprime", "SNR", "mu", "sigma", "kept_fraction", "Q_patch",
+                                             "readings")}
     out.update(t)
+    out["t_sensor_s"] = t_sensor
+    out["sensor"] = info
     out["camera_energy"] = [float(np.sum(im, dtype=np.float64)) for im in imgs]
     out["t_total_s"] = time.perf_counter() - t0
     out["cpu_s"] = time.process_time() - c0
