@@ -664,7 +664,12 @@ def _sections(ctx, sc: dict, ns: dict) -> list[str]:
         "run (the r^2 law as a radial warp of the pinhole image about the principal point, as the thesis warps its "
         "images): Q_D / Q_D0 at " + f"{top} particles/mm^3, " + "; ".join(
             f"{d} %: eq. A.3 {_ci_text(rel(cfg(d)))}, r^2 {_ci_text(rel(cfg(d, law='T3.1')))}"
-            for d in sc["t31_levels"]) + ".",
+            for d in sc["t31_levels"]) + ".\n\n"
+        "The relative losses at every density (mean and 95 % interval over the fields of the per-field ratio; the "
+        "SA rows are Q_SA0 - Q_SA, the others Q_D / Q_D0):\n\n| configuration | "
+        + " | ".join(f"{rho:g}/mm^3" for rho in ns["dens"]) + " |\n|---|" + "---|" * len(ns["dens"]) + "\n"
+        + "\n".join(f"| {lab} | " + " | ".join(_ci_text(fn(rho)) for rho in ns["dens"]) + " |"
+                    for lab, fn in _loss_table(sc, cfg, rel)),
         "## PSF energies (Table 3.3)\n\n"
         "| SA [waves] | paper centre / ring 1 / ring 2 | ours (f/2.8, working f/3.36) | ours at f/2.8 without (1+M) | "
         "ours at f/5.6 |\n|---|---|---|---|---|\n" + "\n".join(ns["psf_lines"]) + "\n\n" + PSF_FINDING,
@@ -726,6 +731,23 @@ PSF_FINDING = (
     "image period equals the 5 x 5 window, so the tails fold back into the rings (the table's excess ring-2 "
     "energy, 0.022 against 0.009), at lambda N = 2.6 um, still not f/2.8 in visible light. We keep the stated "
     "optics; the paper-PSF arm (rows `_paperpsf`, an input) images with the table itself.")
+
+def _loss_table(sc: dict, cfg, rel) -> list:
+    """(label, per-density function of the per-field values) for the losses table: each D under
+    both laws, each SA, and SA 0.1 under 1 % distortion."""
+    out = []
+    for d in sc["d_levels"]:
+        if d:
+            out.append((f"D {d} %, eq. A.3", lambda rho, d=d: rel(cfg(d), rho=rho)))
+            if d in sc["t31_levels"]:
+                out.append((f"D {d} %, r^2 law", lambda rho, d=d: rel(cfg(d, law="T3.1"), rho=rho)))
+    for sa in sc["sa_levels"]:
+        if sa:
+            out.append((f"SA {sa} waves (loss)", lambda rho, sa=sa: rel(cfg(0.0, sa), rho=rho, op="diff")))
+    if 1.0 in sc["combined_levels"]:
+        out.append(("SA 0.1 under D 1 % (loss)", lambda rho: rel(cfg(1.0, 0.1), rho=rho, ref=cfg(1.0), op="diff")))
+    return out
+
 
 def _causes(ns: dict) -> str:
     """The measured cause of each standing disagreement, from the run's numbers."""
