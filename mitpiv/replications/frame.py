@@ -60,7 +60,6 @@ from mitpiv.progress import Progress, bar
 
 __all__ = ["Row", "Kind", "Curve", "Study", "ReplicationContext", "ReplicationResult", "compare_value",
            "compare_trend", "interval", "verdict", "classify_rows", "unused_kinds", "tally", "tally_line", "code_hash",
-           "with_data_hash",
            "code_modules", "replicate", "reclassify", "get_study", "list_studies", "write_outputs", "RESULTS_KEYS",
            "KINDS", "ARMS", "VERDICTS"]
 
@@ -404,10 +403,6 @@ class Study:
     describe: str = ""
     kinds: Mapping[str, Kind] = field(default_factory=dict)
     inputs_from_paper: Mapping[str, str] = field(default_factory=dict)
-    #: files a point reads besides mitpiv's modules (a scene the physically based arm renders,
-    #: its experiment file), relative to the repository root: hashed with the code
-    #: (:func:`with_data_hash`), so a point rendered from another scene is computed again
-    data_files: tuple[str, ...] = ()
 
 
 def _kind_of(study: Study, row_id: str) -> Kind | None:
@@ -554,25 +549,6 @@ def code_hash(module: str) -> str:
     for m in code_modules(module):
         h.update(f"{m}\n".encode())
         h.update(_module_file(m).read_bytes())
-    return h.hexdigest()[:16]
-
-
-def with_data_hash(code: str, files: Sequence[str]) -> str:
-    """``code`` (a :func:`code_hash`) combined with the content of ``files`` (paths relative to
-    the repository root, :attr:`Study.data_files`); ``code`` itself when there are none."""
-    import hashlib
-
-    if not files:
-        return code
-    root = _PKG_ROOT.parent
-    h = hashlib.sha256(f"code {code}\n".encode())
-    for name in sorted(files):
-        f = root / name
-        if not f.is_file():
-            raise ConfigError(f"replicate: the study's data file {name!r} is not at {f}; the points read it, so the "
-                              "run needs the repository's checkout (an editable install, `make setup`).")
-        h.update(f"{name}\n".encode())
-        h.update(f.read_bytes())
     return h.hexdigest()[:16]
 
 
@@ -1027,7 +1003,7 @@ def replicate(name: str, out=None, *, quick: bool = False, seed: int = 0, worker
         raise ConfigError(f"replicate: --out {str(out)!r} is a file; give a folder for the results.")
     out.mkdir(parents=True, exist_ok=True)
     ctx = ReplicationContext(name=name, out=out, quick=quick, seed=seed, workers=workers, progress=progress,
-                             code_hash=with_data_hash(code_hash(_registry()[name]), study.data_files),
+                             code_hash=code_hash(_registry()[name]),
                              commit=_commit())
     command = " ".join(["mitpiv", "replicate", name] + (["--quick"] if quick else []) + ["--out", str(out)]
                        + ([f"--seed {seed}"] if seed else []) + (["--allow-mixed"] if allow_mixed else []))

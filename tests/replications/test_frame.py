@@ -361,29 +361,3 @@ def test_the_committed_results_carry_the_studies_kinds_and_the_generated_tally(n
         for text in (r.note, r.why):
             if text:
                 assert text.replace("|", "\\|").replace("\n", " ") in md, (r.id, text[:60])
-
-
-def test_a_study_s_data_files_are_hashed_with_its_code(tmp_path, monkeypatch):
-    """A point that renders a scene depends on the scene's files as on the code: editing the
-    experiment file changes the hash; a study without data files keeps its code hash."""
-    pkg = tmp_path / "mitpiv"
-    pkg.mkdir()
-    (tmp_path / "scenes").mkdir()
-    (tmp_path / "scenes" / "experiment.toml").write_text("[sensor]\nbit_depth = 12\n")
-    monkeypatch.setattr(replication, "_PKG_ROOT", pkg)
-    code = "0123456789abcdef"
-    assert replication.with_data_hash(code, ()) == code
-    h = replication.with_data_hash(code, ("scenes/experiment.toml",))
-    assert len(h) == 16 and h != code
-    assert replication.with_data_hash(code, ("scenes/experiment.toml",)) == h
-    (tmp_path / "scenes" / "experiment.toml").write_text("[sensor]\nbit_depth = 16\n")
-    assert replication.with_data_hash(code, ("scenes/experiment.toml",)) != h
-    with pytest.raises(ConfigError, match=r"data file 'scenes/missing.xml'"):
-        replication.with_data_hash(code, ("scenes/missing.xml",))
-
-
-def test_the_sapiv_study_hashes_the_scene_it_renders():
-    from mitpiv.replications.sapiv_distortion.study import STUDY
-
-    assert set(STUDY.data_files) == {"scenes/sapiv_paper/scene.xml", "scenes/sapiv_paper/experiment.toml"}
-    assert all((replication._PKG_ROOT.parent / f).is_file() for f in STUDY.data_files)

@@ -46,21 +46,22 @@ def test_quick_run_schema_and_ids(tmp_path):
     # the physically based arm: one rendered field per point in --quick
     pb = [r for r in res["rows"] if r["arm"] == "physical"]
     assert pb and all(r["id"].endswith("_pb") and r["n"] == 1 for r in pb)
-    # ... recorded by the experiment's sensor: one exposure for the set, the brightest pixel at
-    # peak_photons (20000 photons x QE 0.5 / 3 e- per count = 3333 counts; shot noise 33 counts),
-    # each camera's counts through its own pupil; the same render also scored before the sensor
+    # ... recorded by the experiment's sensor: one fixed exposure for every point (as one laser and
+    # one shutter give), each camera's counts through its own pupil, within the 12-bit range;
+    # the same render also scored at the same exposure without noise
     import json
 
     from mitpiv.replications.sapiv_distortion.physical import SENSOR
 
-    pt = json.loads(next((tmp_path / "work" / "cache").glob("pt_D0_SA0_none_mitsubapsf_*.json")).read_text())["result"]
-    info = pt["sensor"]
-    top = SENSOR.peak_photons * SENSOR.quantum_efficiency / SENSOR.gain_e_per_count
-    assert info["photometry"] == "aperture" and info["saturated_fraction"] == 0.0
-    assert 0.9 * top < max(info["peak_counts"]) < 1.1 * top
-    # the Mie phase function: the backward cameras' brightest pixel is a few % of the forward ones'
-    assert min(info["peak_counts"]) < 0.2 * max(info["peak_counts"])
-    assert set(pt["no_sensor"]) >= {"Q", "Qprime", "SNR", "readings"} and 0 < pt["no_sensor"]["Q"] <= 1
+    pts = [json.loads(f.read_text())["result"] for f in (tmp_path / "work" / "cache").glob("pt_*_mitsubapsf_*.json")]
+    assert len(pts) == 2  # D 0 and 2 %, one field
+    for pt in pts:
+        info = pt["sensor"]
+        assert info["photometry"] == "aperture" and info["exposure"] == SENSOR.exposure
+        assert info["saturated_fraction"] == 0.0 and 500 < max(info["peak_counts"]) < 4095 - SENSOR.black_level
+        # the Mie phase function: the backward cameras record a few % of the forward ones' light
+        assert min(info["sum_counts"]) < 0.2 * max(info["sum_counts"])
+        assert set(pt["no_sensor"]) >= {"Q", "Qprime", "SNR", "readings", "sum_counts"} and 0 < pt["no_sensor"]["Q"] <= 1
     assert rows["Q_SA0.1_paperpsf"]["kind"] == "input" and rows["mapping_px_D2"]["kind"] == "info"
     assert set(res["curves"]["Q_vs_density_threshold_k"]["y"]) == {"k0", "k1", "k2", "k3", "k5", "k8"}
     md = (tmp_path / "report.md").read_text()
@@ -334,24 +335,33 @@ def test_committed_rows_take_the_declared_kinds():
 
 def test_the_physical_arm_records_through_the_experiment_s_sensor():
     """The rendered arm's sensor is the ``[sensor]`` table of scenes/sapiv_paper/experiment.toml
-    (one source), a real camera's: photon and read noise, 12 bits; the counts follow each
-    camera's rendered light with one exposure for the set (a camera 4 x brighter records 4 x
-    the counts, not its own full range)."""
+    (one source), a real camera's: a fixed exposure, photon and read noise, a black level, 12
+    bits. The counts follow each camera's light with that exposure (a camera 4 x brighter
+    records 4 x the counts), less the black level; the noise-free model gives the exposure's
+    mean exactly."""
     import tomllib
 
     from mitpiv.imaging import SensorModel
-    from mitpiv.replications.sapiv_distortion.physical import SCENE, SENSOR, sensor_counts
+    from mitpiv.replications.sapiv_distortion.physical import SCENE, SENSOR, noise_free, sensor_counts
 
     table = tomllib.loads(SCENE.with_name("experiment.toml").read_text())["sensor"]
     assert SENSOR == SensorModel(**table)
-    assert SENSOR.shot_noise and SENSOR.read_noise_e > 0 and SENSOR.bit_depth == 12
+    assert SENSOR.exposure and SENSOR.peak_photons is None  # never normalised per image
+    assert SENSOR.shot_noise and SENSOR.read_noise_e > 0 and SENSOR.black_level > 0 and SENSOR.bit_depth == 12
     rng = np.random.default_rng(1)
     base = np.zeros((64, 64))
     base[rng.integers(0, 64, 40), rng.integers(0, 64, 40)] = 1.0
-    counts, info = sensor_counts([base, 4 * base], ["a", "b"], [None, None], seed=3,
-                                 model=SensorModel(**{**table, "photometry": "image"}))
-    top = SENSOR.peak_photons * SENSOR.quantum_efficiency / SENSOR.gain_e_per_count
+    unit = 2000.0 / SENSOR.exposure  # a rendered value of 'unit' is 2000 photons
+    model = SensorModel(**{**table, "photometry": "image"})
+    counts, info = sensor_counts([unit * base, 4 * unit * base], ["a", "b"], [None, None], seed=3, model=model)
+    per = 2000.0 * SENSOR.quantum_efficiency / SENSOR.gain_e_per_count  # 333 counts
     on = base > 0
-    assert info["photometry"] == "image" and counts[0].dtype == np.float64
-    assert np.mean(counts[1][on]) == pytest.approx(top, rel=0.02)  # 40 pixels of sd 33 counts: 0.3 %
-    assert np.mean(counts[0][on]) == pytest.approx(top / 4, rel=0.03)
+    assert info["photometry"] == "image" and info["exposure"] == SENSOR.exposure and counts[0].dtype == np.float64
+    # 40 pixels of sd sqrt(1000 e-) / 3 = 10.5 counts (a) and 21 counts (b): the mean within 1.3 %, 5 sd
+    assert np.mean(counts[0][on]) == pytest.approx(per, rel=0.025)
+    assert np.mean(counts[1][on]) == pytest.approx(4 * per, rel=0.02)
+    # the dark pixels: the black level subtracted, read noise of 10 e- / 3 = 3.3 counts about 0
+    dark = counts[0][~on]
+    assert abs(np.mean(dark)) < 0.2 and 2.8 < np.std(dark) < 3.9
+    light, _ = sensor_counts([unit * base], ["a"], [None], seed=3, model=noise_free(model))
+    np.testing.assert_allclose(light[0], per * base, rtol=1e-12, atol=1e-9)

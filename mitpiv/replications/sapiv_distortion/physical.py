@@ -12,9 +12,22 @@ the Mie phase function's ratio, and the film's Catmull-Rom reconstruction filter
 the model's pixel integration. The rendered images go through the paper-model arm's own
 chain: the calibration of the same distortion and aberration (the targets imaged by the
 model: the true cameras are the same, checked per sensor), refocusing, the readings and
-the metrics (:func:`mitpiv.replications.sapiv_distortion.model.score_images`). No sensor
-noise: the thesis has none. Table 3.1's r^2 law is not a Brown-Conrady distortion, which the
-sensor renders, so this arm runs eq. A.3 only.
+the metrics (:func:`mitpiv.replications.sapiv_distortion.model.score_images`). Table 3.1's
+r^2 law is not a Brown-Conrady distortion, which the sensor renders, so this arm runs eq. A.3
+only.
+
+The sensor: the thesis images without one (its pixel values are the irradiance). A camera
+records counts, so the rendered images go through the sensor model of
+``scenes/sapiv_paper/experiment.toml`` (``[sensor]``, :data:`SENSOR`, read from that file):
+one fixed exposure for every camera, configuration and density (photons per watt a pixel
+collects: aperture photometry, each pixel's light through its own f/2.8 pupil), Poisson
+photon noise, read noise, a black level (subtracted before refocusing, as a user subtracts
+the camera's dark frame) and 12 bits (:func:`mitpiv.imaging.apply_sensor_set`). The thesis
+names no camera, so these values are ours (a generic 12-bit scientific camera), not the
+paper's. Each point is scored twice on the same render: the recorded counts (the arm's rows)
+and the same exposure without noise or quantisation (``no_sensor``: the light each pixel
+collects, in counts), so the report can tell what the optics change from what the sensor
+changes.
 """
 
 from __future__ import annotations
@@ -29,7 +42,7 @@ import numpy as np
 
 from mitpiv.errors import ConfigError
 
-__all__ = ["SCENE", "SENSOR", "render_field", "physical_point", "sensor_counts"]
+__all__ = ["SCENE", "SENSOR", "render_field", "physical_point", "sensor_counts", "noise_free", "scene_hash"]
 
 SCENE = Path(__file__).resolve().parents[3] / "scenes" / "sapiv_paper" / "scene.xml"
 
@@ -49,6 +62,18 @@ def _sensor_model():
 
 #: the sensor model of ``scenes/sapiv_paper/experiment.toml`` (its ``[sensor]`` table)
 SENSOR = _sensor_model()
+
+
+def scene_hash() -> str:
+    """A content hash (12 hex digits) of the scene and experiment files this arm renders with:
+    part of its points' cache keys, so a point rendered from other files is computed again
+    (the replication frame hashes mitpiv's modules, not the scenes)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for f in (SCENE, SCENE.with_name("experiment.toml")):
+        h.update(f.read_bytes())
+    return h.hexdigest()[:12]
 #: radius of the particles' proxy spheres in the PLY [mm] (hit only by stray rays; a pinhole
 #: camera's particle light is traced from the particle, not found by intersection)
 PROXY_RADIUS_MM = 0.01
@@ -105,21 +130,32 @@ def render_field(system, cameras, positions_mm, *, distortion_percent: float, sp
 
 
 def sensor_counts(imgs, ids, records, *, seed: int, model=None) -> tuple[list[np.ndarray], dict]:
-    """The counts the cameras record of the rendered ``imgs`` (one set: one exposure for all,
-    :func:`mitpiv.imaging.apply_sensor_set` with each sensor's record for aperture
-    photometry), as float64 in the same order, and what they were taken with."""
+    """The counts the cameras record of the rendered ``imgs`` (one set, with the model's
+    exposure, :func:`mitpiv.imaging.apply_sensor_set` with each sensor's record for aperture
+    photometry), less the black level, as float64 in the same order, and what they were taken
+    with. ``model`` defaults to :data:`SENSOR`."""
     from mitpiv.imaging import apply_sensor_set
 
     model = SENSOR if model is None else model
     res = apply_sensor_set({(i, 0): im for i, im in zip(ids, imgs, strict=True)}, model, seed=seed,
                            cameras=dict(zip(ids, records, strict=True)), on_degenerate="raise")
-    counts = [res.counts[(i, 0)].astype(np.float64) for i in ids]
+    raw = [res.counts[(i, 0)] for i in ids]
     top = 2 ** model.bit_depth - 1 if model.bit_depth else math.inf
+    counts = [c.astype(np.float64) - model.black_level for c in raw]
     info = {"photometry": res.photometry, "exposure": res.exposure,
             "peak_counts": [float(c.max()) for c in counts],
-            "mean_counts": [float(c.mean()) for c in counts],
-            "saturated_fraction": float(np.mean([np.mean(c >= top) for c in counts]))}
+            "sum_counts": [float(np.sum(c)) for c in counts],
+            "saturated_fraction": float(np.mean([np.mean(c >= top) for c in raw]))}
     return counts, info
+
+
+def noise_free(model):
+    """``model`` without photon or read noise, black level or quantisation: the light each pixel
+    collects at the same exposure, in counts."""
+    from dataclasses import replace
+
+    return replace(model, shot_noise=False, read_noise_e=0.0, dark_current_e_per_s=0.0, black_level=0.0,
+                   gaussian_noise_percent=0.0, bit_depth=None, full_well_e=None)
 
 
 def physical_point(system, cameras, mappings, *, distortion_percent: float, spherical_waves: float,
@@ -135,12 +171,15 @@ def physical_point(system, cameras, mappings, *, distortion_percent: float, sphe
     imgs, t = render_field(system, cameras, field["imaged"], distortion_percent=distortion_percent,
                            spherical_waves=spherical_waves, seed=seed)
     t1 = time.perf_counter()
-    counts, info = sensor_counts(imgs, t.pop("ids"), t.pop("records"), seed=seed)
+    ids, records = t.pop("ids"), t.pop("records")
+    counts, info = sensor_counts(imgs, ids, records, seed=seed)
+    light, light_info = sensor_counts(imgs, ids, records, seed=seed, model=noise_free(SENSOR))
     t_sensor = time.perf_counter() - t1
     out = score_images(system, counts, mappings, field)
-    bare = score_images(system, imgs, mappings, field)
+    bare = score_images(system, light, mappings, field)
     out["no_sensor"] = {k: bare[k] for k in ("Q", "Qprime", "SNR", "mu", "sigma", "kept_fraction", "Q_patch",
                                              "readings")}
+    out["no_sensor"]["sum_counts"] = light_info["sum_counts"]
     out.update(t)
     out["t_sensor_s"] = t_sensor
     out["sensor"] = info

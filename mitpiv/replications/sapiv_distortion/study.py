@@ -239,9 +239,15 @@ def run(ctx) -> ReplicationResult:
                                   "seed": ctx.seed * 100000 + di * 100 + r, "r": r,
                                   "patches": [list(p) for p in sc["patches"]], "patch_mm": sc["patch_mm"],
                                   "mappings": cal[cal_key]["mappings"]})
+    # a rendered point also depends on the scene and experiment files it renders with
+    scene = ""
+    if arms["physical"]:
+        from mitpiv.replications.sapiv_distortion.physical import scene_hash
+
+        scene = "_scene" + scene_hash()
     res = ctx.map(evaluation_point, items,
                   key=lambda it: f"pt_{_ckey(it['law'], it['D'], it['SA'], it['model'], it['psf'])}_rho{_fmt(it['density'])}"
-                                 f"_s{it['seed']}_{crop}", desc="points")
+                                 f"_s{it['seed']}_{crop}" + (scene if it["psf"] == "mitsuba" else ""), desc="points")
     R = {(it["law"], it["D"], it["SA"], it["model"], it["psf"], it["density"], it["r"]): x
          for it, x in zip(items, res, strict=True)}
 
@@ -455,7 +461,8 @@ def run(ctx) -> ReplicationResult:
             rows.append(compare_trend("sigma_D2_over_D0_pb", "sigma at 2 % over 0 %, largest over the densities, "
                                       "rendered", "Fig. 4-8", "< 1", float(np.mean(v)), samples=v, upper=1.0, **kw))
         pts = [R[pbz + (top, r)] for r in seeds_of(pbz, top)]
-        spread = [max(x["camera_energy"]) / min(x["camera_energy"]) for x in pts]
+        spread_ns = [max(x["no_sensor"]["sum_counts"]) / min(x["no_sensor"]["sum_counts"]) for x in pts]
+        spread = [max(x["sensor"]["sum_counts"]) / min(x["sensor"]["sum_counts"]) for x in pts]
         ns = "no_sensor"
         pb_lines = [("Q at 0 %", _ci_text(val(cfg())), _ci_text(val(pbz, sub=ns)), _ci_text(val(pbz)))]
         if len(dens) > 1:
@@ -473,8 +480,8 @@ def run(ctx) -> ReplicationResult:
         pb_lines.append(("Q at 0 %, blob truth", _ci_text(val(cfg(), "Q", reading="plane/blob")),
                          _ci_text(val(pbz, "Q", reading="plane/blob", sub=ns)),
                          _ci_text(val(pbz, "Q", reading="plane/blob"))))
-        pb_lines.append(("brightest / dimmest camera (image energy)", "1 (every view alike)", _ci_text(spread),
-                         _ci_text(spread)))
+        pb_lines.append(("brightest / dimmest camera (the light it records)", "1 (every view alike)",
+                         _ci_text(spread_ns), _ci_text(spread)))
         pb_lines.append(("peak counts, brightest / dimmest camera", "-", "-",
                          f"{np.mean([max(x['sensor']['peak_counts']) for x in pts]):.0f} / "
                          f"{np.mean([min(x['sensor']['peak_counts']) for x in pts]):.0f}"))
@@ -567,7 +574,7 @@ def run(ctx) -> ReplicationResult:
                                    "rel": rel, "seeds": seeds, "R": R, "dens": dens, "read_lines": read_lines,
                                    "rings": rings, "patch_q": patch_q, "patch_bg": patch_bg, "dist_lines": dist_lines,
                                    "psf_lines": psf_lines, "map_err": map_err, "brown": brown,
-                                   "pb_lines": pb_lines})
+                                   "pb_lines": pb_lines, "sensor_text": _sensor_text()})
     for c in curves.values():  # NaN is written as null
         c.y = {k: [None if (v is None or not math.isfinite(v)) else v for v in ys] for k, ys in c.y.items()}
     return ReplicationResult(rows=rows, curves=curves, sections=sections, figures=figures)
@@ -629,14 +636,7 @@ def _sections(ctx, sc: dict, ns: dict) -> list[str]:
         "volume's corner), mean over the fields:\n\n| D | " + " | ".join(f"r_n {g:.2f}" for g in ns["rings"]) + " |\n|"
         + "---|" * (len(ns["rings"]) + 1) + "\n"
         + "\n".join(f"| {d} % | " + " | ".join(f"{q:.3f}" for q in ns["patch_q"][d]) + " |" for d in ns["patch_q"])
-        + "\n\nThe patches' backgrounds differ: relative to the union of the patches, the mean refocused intensity "
-        "at 0 % is " + ", ".join(f"{m:.2f}" for m in ns["patch_bg"]["mu_patch"]) + " and the fraction of voxels the "
-        "threshold keeps " + ", ".join(f"{k:.2f}" for k in ns["patch_bg"]["kept_patch"]) + " at r_n "
-        + ", ".join(f"{g:.2f}" for g in ns["rings"]) + ". Each plane has one threshold over the union (mean + 3 std "
-        "of its voxels), and the out-of-focus light a patch receives comes from the particles within the cameras' "
-        "parallax of it (8.6 mm): the volume ends 1.5 mm beyond the outer patches, so they see fewer out-of-focus "
-        "particles, a lower background under the same threshold, fewer ghost voxels kept and a higher Q, while the "
-        "axis patch has particles all around. Distortion, which grows with r_n, works against this."
+        + _background_text(ns) +
         "\n\nThe previous lattice reached r_n 0.67, leaving out the outer quarter of the field where a percent "
         "distortion moves points most.",
         "## Crop and cost\n\n"
@@ -691,16 +691,18 @@ def _sections(ctx, sc: dict, ns: dict) -> list[str]:
         "scattering by Lorenz-Mie theory under a top-hat sheet along +x) and scored by the same chain (the "
         f"calibration of the same D and SA; the adopted reading), at {top} particles/mm^3 (mean and 95 % interval over "
         "the fields). The arm's rows score the counts its cameras record (the sensor of `scenes/sapiv_paper/"
-        "experiment.toml`, ours: the thesis names no camera; 12 bits, QE 0.5, read noise 10 e-, one exposure for the "
-        "25 cameras with the brightest pixel of the set at 20000 photons, aperture photometry, photon noise); the "
-        "middle column scores the same renders before the sensor, so the table splits what the optics change from "
-        "what the sensor changes:\n\n| quantity | paper-model arm | rendered, no sensor | rendered, with the sensor "
+        f"experiment.toml`, ours: the thesis names no camera; {ns['sensor_text']}); the middle column scores the same "
+        "renders at the same exposure without noise or quantisation (the light each pixel collects), so the table "
+        "splits what the optics change from what the sensor changes:\n\n| quantity | paper-model arm | rendered, "
+        "no sensor | rendered, with the sensor "
         "(the arm's rows) |\n|---|---|---|---|\n"
         + "\n".join(f"| {a} | {b} | {c} | {d} |" for a, b, c, d in ns["pb_lines"]) + "\n\n"
         "The array sees the sheet's light scattered at 59-121 degrees: the Mie phase function of a 20 um particle "
-        "makes the forward cameras' views of a particle far brighter than the backward ones', so the additive "
-        "average (eq. 2.3) is dominated by a part of the array, whose smaller synthetic aperture refocuses a "
-        "particle over more planes; the image model gives every view the same brightness.",
+        "makes the forward cameras' views of a particle far brighter than the backward ones' (the light ratio "
+        "above), while the image model gives every view the same brightness. Our reading of the lower Q, not "
+        "measured apart from the render's other differences (its reconstruction filter, Monte Carlo noise): the "
+        "additive average (eq. 2.3) is dominated by the bright part of the array, whose smaller synthetic aperture "
+        "refocuses a particle over more planes. The image model with Mie-weighted views would separate the two.",
         "## What next: a calibration that models distortion\n\n"
         + "\n".join(f"- D {d} %: Q = {qb:.3f} with a Brown-Conrady calibration (refocusing through the full mapping), "
                     f"{qd:.3f} with the pinhole, {qz:.3f} at 0 % (first particle field)"
@@ -731,6 +733,39 @@ PSF_FINDING = (
     "image period equals the 5 x 5 window, so the tails fold back into the rings (the table's excess ring-2 "
     "energy, 0.022 against 0.009), at lambda N = 2.6 um, still not f/2.8 in visible light. We keep the stated "
     "optics; the paper-PSF arm (rows `_paperpsf`, an input) images with the table itself.")
+
+def _sensor_text() -> str:
+    """The physically based arm's sensor in words, from its model."""
+    from mitpiv.replications.sapiv_distortion.physical import SENSOR as m
+
+    return (f"{m.bit_depth} bits, QE {m.quantum_efficiency:g}, read noise {m.read_noise_e:g} e-, "
+            f"{m.gain_e_per_count:g} e- per count, a black level of {m.black_level:g} counts subtracted before "
+            f"refocusing, photon noise, one fixed exposure of {m.exposure:.3g} photons per watt collected for every "
+            "camera, configuration and density, aperture photometry")
+
+
+def _background_text(ns: dict) -> str:
+    """Each ring's background under the union's threshold at 0 %, and what it says about Q's
+    rise towards the edge (from the run's numbers; nothing with one ring)."""
+    rings, bg, q0 = ns["rings"], ns["patch_bg"], ns["patch_q"].get(0.0)
+    if len(rings) < 2 or q0 is None:
+        return ""
+    mu, kept = bg["mu_patch"], bg["kept_patch"]
+    text = ("\n\nThe patches' backgrounds differ: relative to the union of the patches, the mean refocused intensity "
+            "at 0 % is " + ", ".join(f"{m:.2f}" for m in mu) + " and the fraction of voxels the threshold keeps "
+            + ", ".join(f"{k:.2f}" for k in kept) + " at r_n " + ", ".join(f"{g:.2f}" for g in rings) + " (means over "
+            "the fields). Each plane has one threshold over the union (mean + 3 std of its voxels), and the "
+            "out-of-focus light a patch receives comes from the particles within the cameras' parallax of it (8.6 "
+            "mm); the volume ends at the outer patches' edge, so they have particles on one side only.")
+    down = all(b < a for a, b in zip(mu, mu[1:], strict=False)) and all(b < a for a, b in zip(kept, kept[1:], strict=False))
+    up = all(b > a for a, b in zip(q0, q0[1:], strict=False))
+    if down and up:
+        return text + (" The background and the kept fraction fall towards the edge while Q rises: under the same "
+                       "threshold the outer patches keep fewer ghost voxels, which is why Q at 0 % is lowest on the "
+                       "axis. Distortion, which grows with r_n, works against this.")
+    return text + (" The background, the kept fraction and Q are not all monotone in r_n here, so the edge effect "
+                   "does not by itself explain the field's Q profile.")
+
 
 def _loss_table(sc: dict, cfg, rel) -> list:
     """(label, per-density function of the per-field values) for the losses table: each D under
@@ -765,6 +800,10 @@ def _causes(ns: dict) -> str:
             else f"it falls under k {', '.join(falls)} only" if falls else "it rises under every k")
     blob = [ln for ln in ns["read_lines"] if ln.startswith("| plane/blob")]
     bad = {r.id for r in ns["rows"] if r.kind == "physics" and r.verdict in ("disagrees", "inconclusive")}
+    verdict = {r.id: r.verdict for r in ns["rows"]}
+    r01 = next((r for r in ns["rows"] if r.id == "nSNR_D0.1"), None)
+    nsnr01 = "n/a" if r01 is None or r01.ours is None else (
+        f"{r01.ours:.3f}" + (f" [{r01.ci[0]:.3f}, {r01.ci[1]:.3f}]" if r01.ci else ""))
     items = [
         (("Q_D0",), "- `Q_D0` (and `Q_D0_pb`): the level of Q is set by the unstated true volume and the reconstructed particles' "
         "depth of field: a refocused particle spans several 0.05 mm planes, while the literal truths (a 20 um sphere "
@@ -775,13 +814,18 @@ def _causes(ns: dict) -> str:
         f"Q ({top} minus {lo} particles/mm^3, blob truth) under thresholds mu + k sigma of the noise fit: {slopes}; "
         f"{turn} (figure `diag_Q_threshold_k`): the sign is a property of the threshold, which the thesis states as "
         "k = 3 of a fit it does not specify further (the readings table gives both of ours)."),
-        (("nSNR_D0.1",), "- `nSNR_D0.1`: 0.1 % moves a corner pixel by 0.71 px and the mid-field by 0.09 px; the peak loss is smaller "
-        "than the spread of the plane statistics over the fields, so the interval straddles 1 (inconclusive, not a "
-        "disagreement of sign)."),
+        (("nSNR_D0.1",), "- `nSNR_D0.1`: 0.1 % moves a corner pixel by 0.71 px and the mid-field by 0.09 px (eq. A.3), "
+        + ("so small a peak loss that the interval over the fields straddles 1: inconclusive, not a disagreement of "
+           "sign." if verdict.get("nSNR_D0.1") == "inconclusive" else
+           f"and nSNR stays at {nsnr01} (largest over the densities): too small a shift to lower the "
+           "planes' peaks measurably against their spread.")),
         (("sigma_D2_over_D0",), "- `sigma_D2_over_D0`: distortion moves each camera's out-of-focus background by a smooth field without "
         "changing its statistics, so the planes' spread barely moves (sigma_D2 / sigma_D0 "
-        + _ci_text(rel(cfg(2.0), q="sigma")) + f" at {top}/mm^3): misregistered views shift the background, they "
-        "do not smooth it; the thesis's fall of sigma is what a smoothing would do."),
+        + _ci_text(rel(cfg(2.0), q="sigma")) + f" at {top}/mm^3"
+        + (f"; rendered, in counts: {_ci_text(rel(cfg(2.0, psf='mitsuba'), q='sigma', ref=cfg(psf='mitsuba')))}"
+           if cfg(2.0, psf="mitsuba") + (top, 0) in R else "")
+        + "): misregistered views shift the background, they do not smooth it; the thesis's fall of sigma is what "
+        "a smoothing would do."),
         (("psf_",), "- `psf_*`: Table 3.3 is inconsistent with its own stated optics (f/2.8 in visible light): see 'PSF "
         "energies'. Our PSF is the stated optics'."),
         (("shift_D2_rn0.5",), "- `shift_D2_rn0.5`: Table 3.1's inner columns follow an r^2 law, the thesis's eq. A.3 an r^3 law; both laws "
@@ -853,5 +897,4 @@ STUDY = Study(
              "waves, six readings of the threshold and truth, intervals over particle fields",
     kinds=KINDS,
     inputs_from_paper=INPUTS_FROM_PAPER,
-    data_files=("scenes/sapiv_paper/scene.xml", "scenes/sapiv_paper/experiment.toml"),
 )
