@@ -17,7 +17,7 @@ from mitpiv.tracking.otf import (
     refine_otf,
     stamps,
 )
-from mitpiv.tracking.stb import Tracks, link_four, predict, regularise, stb
+from mitpiv.tracking.stb import Tracks, link_four, predict, predict_adaptive, regularise, stb
 
 __all__ = [
     "OTF",
@@ -37,6 +37,7 @@ __all__ = [
     "Tracks",
     "link_four",
     "predict",
+    "predict_adaptive",
     "regularise",
     "stb",
     "particle_metrics",

@@ -20,7 +20,11 @@ Steps
    track's particle (the shorter ends) or, with ``joint_check`` and ``track_support``,
    loses its image support in some camera (its particle then joins the untracked).
    Untracked particles of the last four frames are linked into new tracks as in step 1,
-   around the velocity of the nearest tracks.
+   around the velocity of the nearest tracks; then (``back_shake``) pairs of untracked
+   particles of the last two frames, linked around that velocity, are extended two frames
+   back by shaking their extrapolated positions in those frames' images less the tracked
+   particles, and start tracks where the shaken particle stays within ``predict_px`` of
+   the extrapolation and keeps its intensity (IPR need find a particle in 2 frames, not 4).
 5. :func:`regularise`: a local polynomial (order 2, a window of ``2 h + 1`` frames) fitted
    to every track at every time gives position, velocity and acceleration; windows are
    truncated at track ends (the fit needs ``order + 1`` points).
@@ -42,7 +46,7 @@ from mitpiv.progress import bar
 from mitpiv.tracking.ipr import _check_images, _prune, _screen, auto_threshold, ipr, mm_per_px, shake
 from mitpiv.tracking.otf import OTF, project_particles
 
-__all__ = ["Tracks", "link_four", "predict", "regularise", "stb"]
+__all__ = ["Tracks", "link_four", "predict", "predict_adaptive", "regularise", "stb"]
 
 log = logging.getLogger(__name__)
 
@@ -185,6 +189,32 @@ def predict(positions_mm, *, points: int = 4, order: int = 2) -> np.ndarray:
     return np.einsum("p,kpc->kc", w[0], x[:, -points:])
 
 
+def predict_adaptive(positions_mm) -> np.ndarray:
+    """One frame ahead of each track, by a fit whose order follows the track's length: a
+    line through its last 4 or 5 positions, a parabola through 6 or more.
+
+    The order-2 fit through 4 points (:func:`predict` ``points=4``) amplifies the position
+    noise 2.8 times (its extrapolation weights 0.75, -1.25, -0.75, 2.25), a line through 4
+    points 1.2 times and a parabola through 8 points 1.4 times, while the bias of a line
+    grows with the acceleration: on the rendered LPT sequence at 0.1 ppp the shaken positions
+    carry about 0.1 px of noise, against a prediction bias of 0.04 px (parabola through 4)
+    to 0.1 px (line through 4) on the true trajectories.
+
+    positions_mm : (K, L, 3) the last L positions of K tracks, oldest first, NaN before a
+    track's start (tracks are contiguous; at least 4 finite positions each). Returns (K, 3).
+    """
+    x = np.asarray(positions_mm, dtype=np.float64)
+    n_pts = np.all(np.isfinite(x), axis=2).sum(axis=1)
+    if x.ndim != 3 or x.shape[2] != 3 or (n_pts.size and n_pts.min() < 4):
+        raise ConfigError(f"predict_adaptive: need (K, L, 3) positions with at least 4 finite per track, got shape "
+                          f"{x.shape} and {int(n_pts.min()) if n_pts.size else 0} finite.")
+    out = np.empty((x.shape[0], 3))
+    for m in np.unique(n_pts):
+        sel = n_pts == m
+        out[sel] = predict(x[sel, x.shape[1] - m:], points=int(m), order=2 if m >= 6 else 1)
+    return out
+
+
 # ---------------------------------------------------------------------- regularisation
 def regularise(tracks: Tracks, *, half_window: int = 3, order: int = 2) -> Tracks:
     """Local polynomial fit along every track (see the module notes, step 5).
@@ -231,12 +261,11 @@ def _guess_at(velocity_guess, p):
 
 
 def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_px: float = 10.0,
-        predict_px: float = 1.5, max_shake_px: float = 1.0, velocity_guess=None, shake_iterations: int = 4,
+        predict_px: float = 1.5, max_shake_px: float = 2.0, velocity_guess=None, shake_iterations: int = 4,
         min_intensity: float = 0.1, threshold=None, ipr_options: dict | None = None,
         regularise_window: int = 3, predict_points: int = 8, joint_check: bool = False,
         link_from_tracks: bool = True, camera_gain: bool = True, frame_threshold: bool = True,
-        track_support: float = 0.0,
-        progress=None) -> Tracks:
+        track_support: float = 0.0, back_shake: bool = True, progress=None) -> Tracks:
     """Track particles through a time-resolved image sequence with Shake-The-Box.
 
     Parameters
@@ -248,7 +277,8 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
     search_px : search radius from frame 0 to 1 around the velocity guess [px, object
         space equivalent]; must exceed the largest displacement error of the guess.
     predict_px : search radius around extrapolated positions (initialisation) [px].
-    max_shake_px : a shaken particle farther than this from its prediction ends its track [px].
+    max_shake_px : a shaken particle farther than this from its prediction ends its track [px]
+        (1 px ended true tracks, whose depth is the least certain coordinate, at 0.1 ppp).
     velocity_guess : None, a (3,) velocity [mm/s] or ``v(p_mm)``: the initial link predictor.
     shake_iterations : shaking of tracked particles per frame.
     min_intensity : fraction of the median intensity below which a particle is dropped.
@@ -273,6 +303,8 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
         the residual, whose spread is the tracked particles' misfit.
     track_support : with ``joint_check``, end tracks whose particle some camera supports
         below this fraction after the joint shake (IPR's image-support screen; 0: off).
+    back_shake : start tracks also from pairs of untracked particles extended back by shaking
+        (module notes, step 4).
 
     Returns
     -------
@@ -331,22 +363,66 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
         active = np.concatenate([active, np.ones(chains.shape[0], bool)])
         return int(chains.shape[0])
 
-    def run_length(ids, f):
-        """Frames each track has just before ``f`` (tracks are contiguous), up to predict_points."""
-        win = pos[ids, max(0, f - n_pred):f, 0]
-        return np.isfinite(win).sum(axis=1)
+    def back_tracks(f_last):
+        """Pairs of untracked particles of the last two frames, linked around the nearest
+        tracks' velocity, extended two frames back by shaking their extrapolated positions
+        in those frames' images less the tracked particles: a new track then needs IPR to
+        find its particle in 2 frames, not 4 (at a yield p per frame, p^2 of the particles
+        start instead of p^4)."""
+        nonlocal pos, inten, active
+        fa, fb = f_last - 1, f_last
+        (pa, ea), (pb, eb) = free[fa], free[fb]
+        if pa.shape[0] == 0 or pb.shape[0] == 0:
+            return 0
+        guess = pa + _guess_at(link_velocity(fa - 1) if fa >= 1 else velocity_guess, pa) * dt
+        m = cKDTree(guess).sparse_distance_matrix(cKDTree(pb), predict_mm, output_type="coo_matrix")
+        if m.nnz == 0:
+            return 0
+        pairs, _ = _greedy_unique(np.stack([m.row, m.col], axis=1).astype(np.int64), m.data)
+        chain = [pb[pairs[:, 1]], pa[pairs[:, 0]]]  # newest first
+        e_cur = 0.5 * (ea[pairs[:, 0]] + eb[pairs[:, 1]])
+        ok = np.ones(pairs.shape[0], bool)
+        es = []
+        for back in (2, 3):
+            fr = f_last - back
+            x = np.stack(chain[::-1], axis=1)  # oldest first
+            pred = predict(x[:, ::-1], points=x.shape[1], order=1)  # the line, backwards in time
+            present = np.all(np.isfinite(pos[:, fr]), axis=1)
+            res = [i - pr for i, pr in zip(frames[fr], project_particles(pos[present, fr], inten[present, fr],
+                                                                           cameras, otf), strict=True)]
+            q, qe, _ = shake(res, cameras, otf, pred, e_cur, step_mm=0.5 * predict_mm, iterations=shake_iterations)
+            ref = np.median(inten[present, fr]) if present.any() else np.median(e_cur)
+            # within the initialisation's radius of the extrapolation, as link_four's chains
+            ok &= (np.all(np.isfinite(q), axis=1) & (np.linalg.norm(q - pred, axis=1) <= predict_mm)
+                   & np.all((q >= lo) & (q <= hi), axis=1) & (qe > min_intensity * ref))
+            chain.append(q)
+            es.append(qe)
+            e_cur = qe
+        if not ok.any():
+            return 0
+        k = int(ok.sum())
+        new_p = np.full((k, n_frames, 3), np.nan)
+        new_e = np.full((k, n_frames), np.nan)
+        for j, fr in enumerate((fb, fa, fb - 2, fb - 3)):
+            new_p[:, fr] = chain[j][ok]
+        new_e[:, fb], new_e[:, fa] = eb[pairs[ok, 1]], ea[pairs[ok, 0]]
+        new_e[:, fb - 2], new_e[:, fb - 3] = es[0][ok], es[1][ok]
+        for fr, col in ((fa, 0), (fb, 1)):
+            keep = np.ones(free[fr][0].shape[0], bool)
+            keep[pairs[ok, col]] = False
+            free[fr] = (free[fr][0][keep], free[fr][1][keep])
+        if fb - 2 in free and free[fb - 2][0].shape[0]:
+            d, _ = cKDTree(chain[2][ok]).query(free[fb - 2][0], k=1)
+            free[fb - 2] = (free[fb - 2][0][d > scale], free[fb - 2][1][d > scale])
+        pos = np.concatenate([pos, new_p])
+        inten = np.concatenate([inten, new_e])
+        active = np.concatenate([active, np.ones(k, bool)])
+        return k
 
     def predict_tracks(ids, f):
-        """Each track's position at ``f``: a line through its last 4-5 positions, a
-        parabola through up to ``predict_points`` (an order-2 fit through 4 noisy points
-        amplifies the position noise 2.8 times, a line 1.2 times)."""
-        out = np.empty((ids.size, 3))
-        n_pts = run_length(ids, f) if adaptive else np.full(ids.size, 4)
-        for m in np.unique(n_pts):
-            sel = n_pts == m
-            order = 2 if (m >= 6 or not adaptive) else 1
-            out[sel] = predict(pos[ids[sel], f - m:f], points=int(m), order=order)
-        return out
+        if not adaptive:
+            return predict(pos[ids, f - 4:f])
+        return predict_adaptive(pos[ids, max(0, f - n_pred):f])
 
     def link_velocity(f0):
         """The link predictor for chains starting at ``f0``: the median velocity of the
@@ -475,8 +551,10 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
                 fp, fe = fp[d > scale], fe[d > scale]
             free[f] = (fp, fe)
             n_new = start_tracks(f) if f >= 3 else 0
+            n_back = back_tracks(f) if (f >= 3 and back_shake) else 0
             free.pop(f - 3, None)
-            history.append({"frame": f, "active": int(active.sum()), "new": n_new, "ended": n_end, **reasons,
+            history.append({"frame": f, "active": int(active.sum()), "new": n_new + n_back, "new_back": n_back,
+                            "ended": n_end, **reasons,
                             "untracked": int(free[f][0].shape[0]) if f in free else 0})
             log.debug("STB frame %d: %s", f, history[-1])
             pb.update()
