@@ -23,8 +23,10 @@ Steps
    around the velocity of the nearest tracks; then (``back_shake``) pairs of untracked
    particles of the last two frames, linked around that velocity, are extended two frames
    back by shaking their extrapolated positions in those frames' images less the tracked
-   particles, and start tracks where the shaken particle stays within ``predict_px`` of
-   the extrapolation and keeps its intensity (IPR need find a particle in 2 frames, not 4).
+   particles; a pair links within ``predict_px`` of that velocity's prediction, and starts
+   a track where the shaken particle stays within ``predict_px`` of the extrapolation, is
+   brighter than ``min_intensity`` times the tracked particles' median and lies on no
+   tracked particle (IPR need find a particle in 2 frames, not 4).
 5. :func:`regularise`: a local polynomial (order 2, a window of ``2 h + 1`` frames) fitted
    to every track at every time gives position, velocity and acceleration; windows are
    truncated at track ends (the fit needs ``order + 1`` points).
@@ -64,10 +66,12 @@ class Tracks:
     velocities_mm_s, accelerations_mm_s2 : (n_tracks, n_frames, 3) from
         :func:`regularise` (None before); positions are then the regularised ones and
         ``raw_positions_mm`` keeps the shaken ones.
-    history : per frame, a dict of counts: active, new and ended tracks, the ended ones by
-        reason (``ended_left_box``, ``ended_deviation`` from the prediction by more than
-        ``max_shake_px``, ``ended_intensity``, ``ended_merged`` into another track) and
-        untracked particles.
+    history : per frame, a dict of counts: active, new (``new_back`` of them from the back
+        shake) and ended tracks, the ended ones by reason (``ended_left_box``,
+        ``ended_deviation`` from the prediction by more than ``max_shake_px``,
+        ``ended_intensity``, ``ended_merged`` into another track, ``ended_support``) and
+        untracked particles; the first frame's also ``camera_gain``, the per-camera gain the
+        shakes used.
     """
 
     positions_mm: np.ndarray
@@ -204,8 +208,10 @@ def predict_adaptive(positions_mm) -> np.ndarray:
     track's start (tracks are contiguous; at least 4 finite positions each). Returns (K, 3).
     """
     x = np.asarray(positions_mm, dtype=np.float64)
+    if x.ndim != 3 or x.shape[2] != 3:
+        raise ConfigError(f"predict_adaptive: need (K, L, 3) positions, got shape {x.shape}.")
     n_pts = np.all(np.isfinite(x), axis=2).sum(axis=1)
-    if x.ndim != 3 or x.shape[2] != 3 or (n_pts.size and n_pts.min() < 4):
+    if n_pts.size and n_pts.min() < 4:
         raise ConfigError(f"predict_adaptive: need (K, L, 3) positions with at least 4 finite per track, got shape "
                           f"{x.shape} and {int(n_pts.min()) if n_pts.size else 0} finite.")
     out = np.empty((x.shape[0], 3))
@@ -292,8 +298,8 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
         shake with the particles IPR found in the residual, not after its own first shake in
         the full images, where the light of its untracked neighbours pulls it; the particle
         of a failed track joins the untracked ones. Off by default: on the rendered 0.1-ppp
-        sequence it ended fewer tracks at first but lowered the yield over 24 frames (42.4
-        against 46.5 %, docs/guide.md).
+        sequence it ended fewer tracks at first but lowered the yield (72.1 against 75.2 %
+        over 16 frames with ``max_shake_px`` = 1, docs/guide.md).
     link_from_tracks : new chains start from the median velocity of the nearest tracks (up to
         8 within 20 px, at least 3) instead of ``velocity_guess`` where there are such tracks.
     camera_gain : every shake uses the per-camera gain IPR measured on the first frame's
@@ -326,10 +332,12 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
     search_mm = check_positive("search_px", search_px, owner="stb", unit="px") * scale
     predict_mm = check_positive("predict_px", predict_px, owner="stb", unit="px") * scale
     max_shake_mm = check_positive("max_shake_px", max_shake_px, owner="stb", unit="px") * scale
-    n_pred = int(predict_points)
-    if isinstance(predict_points, bool) or n_pred != predict_points or n_pred < 4:
+    if isinstance(predict_points, bool) or not isinstance(predict_points, (int, np.integer)) or predict_points < 4:
         raise ConfigError(f"stb: 'predict_points' must be an integer >= 4, got {predict_points!r}.")
+    n_pred = int(predict_points)
     adaptive = n_pred > 4
+    if not (isinstance(track_support, (int, float)) and 0 <= track_support < 1):
+        raise ConfigError(f"stb: 'track_support' must be a fraction in [0, 1), got {track_support!r}.")
     opts = dict(ipr_options or {})
     opts.setdefault("min_intensity", min_intensity)
 
@@ -374,7 +382,7 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
         (pa, ea), (pb, eb) = free[fa], free[fb]
         if pa.shape[0] == 0 or pb.shape[0] == 0:
             return 0
-        guess = pa + _guess_at(link_velocity(fa - 1) if fa >= 1 else velocity_guess, pa) * dt
+        guess = pa + _guess_at(link_velocity(fa), pa) * dt
         m = cKDTree(guess).sparse_distance_matrix(cKDTree(pb), predict_mm, output_type="coo_matrix")
         if m.nnz == 0:
             return 0
@@ -395,6 +403,15 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
             # within the initialisation's radius of the extrapolation, as link_four's chains
             ok &= (np.all(np.isfinite(q), axis=1) & (np.linalg.norm(q - pred, axis=1) <= predict_mm)
                    & np.all((q >= lo) & (q <= hi), axis=1) & (qe > min_intensity * ref))
+            # no particle twice: not on a tracked one, and of two candidates on one, the brighter
+            if present.any() and ok.any():
+                d, _ = cKDTree(pos[present, fr]).query(q, k=1)
+                ok &= d > scale
+            if ok.sum() > 1:
+                idx = np.flatnonzero(ok)
+                prs = cKDTree(q[idx]).query_pairs(scale, output_type="ndarray")
+                if prs.size:
+                    ok[idx[np.where(qe[idx[prs[:, 0]]] >= qe[idx[prs[:, 1]]], prs[:, 1], prs[:, 0])]] = False
             chain.append(q)
             es.append(qe)
             e_cur = qe
