@@ -36,6 +36,7 @@ bench: setup
 	$(PY) bench/bench_reconstruct.py
 	$(PY) bench/bench_analysis.py
 	$(PY) bench/bench_holography.py
+	$(PY) bench/bench_stb.py
 
 clean:
 	rm -rf out .pytest_cache docs/_build docs/_generated

@@ -267,11 +267,12 @@ def _guess_at(velocity_guess, p):
 
 
 def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_px: float = 10.0,
-        predict_px: float = 1.5, max_shake_px: float = 2.0, velocity_guess=None, shake_iterations: int = 4,
+        predict_px: float = 1.5, max_shake_px: float = 1.0, velocity_guess=None, shake_iterations: int = 4,
         min_intensity: float = 0.1, threshold=None, ipr_options: dict | None = None,
         regularise_window: int = 3, predict_points: int = 8, joint_check: bool = False,
         link_from_tracks: bool = True, camera_gain: bool = True, frame_threshold: bool = True,
-        track_support: float = 0.0, back_shake: bool = True, progress=None) -> Tracks:
+        track_support: float = 0.0, back_shake: bool = True, capped_residual: bool = True,
+        progress=None) -> Tracks:
     """Track particles through a time-resolved image sequence with Shake-The-Box.
 
     Parameters
@@ -283,8 +284,7 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
     search_px : search radius from frame 0 to 1 around the velocity guess [px, object
         space equivalent]; must exceed the largest displacement error of the guess.
     predict_px : search radius around extrapolated positions (initialisation) [px].
-    max_shake_px : a shaken particle farther than this from its prediction ends its track [px]
-        (1 px ended true tracks, whose depth is the least certain coordinate, at 0.1 ppp).
+    max_shake_px : a shaken particle farther than this from its prediction ends its track [px].
     velocity_guess : None, a (3,) velocity [mm/s] or ``v(p_mm)``: the initial link predictor.
     shake_iterations : shaking of tracked particles per frame.
     min_intensity : fraction of the median intensity below which a particle is dropped.
@@ -311,6 +311,9 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
         below this fraction after the joint shake (IPR's image-support screen; 0: off).
     back_shake : start tracks also from pairs of untracked particles extended back by shaking
         (module notes, step 4).
+    capped_residual : the residual that IPR searches subtracts each tracked particle with its
+        intensity capped at the track's median over its last 6 frames (a tracked particle
+        shaken beside an untracked one takes in part of its light).
 
     Returns
     -------
@@ -491,7 +494,16 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
                 tracked = np.zeros(0, np.int64)
                 ps, es, pred = np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
             # new particles from the residual images, then everything shaken together
-            res = [i - pr for i, pr in zip(imgs, project_particles(ps, es, cameras, otf), strict=True)] if tracked.size else imgs
+            if tracked.size and capped_residual:
+                # a tracked particle's shake takes in the light of an untracked neighbour that
+                # overlaps it: its intensity grows, and its subtraction would remove part of
+                # the neighbour from the residual that IPR searches; capped at the track's
+                # median over its last frames, the neighbour's light stays
+                med = np.nanmedian(inten[tracked, max(0, f - 6):f], axis=1)  # a track has its last 4 frames
+                e_res = np.minimum(es, med)
+            else:
+                e_res = es
+            res = [i - pr for i, pr in zip(imgs, project_particles(ps, e_res, cameras, otf), strict=True)] if tracked.size else imgs
             # the detection threshold from the frame's own images: the residual's spread is the
             # tracked particles' misfit, which would raise it above the untracked particles
             thr = threshold if threshold is not None or not frame_threshold else \

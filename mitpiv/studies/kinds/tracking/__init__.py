@@ -204,9 +204,8 @@ class TrackingTable(Table):
     tolerance_px: PosFloat = Field(1.0, description="triangulation tolerance of IPR [px]")
     search_px: PosFloat = Field(10.0, description="search radius from frame 0 to 1 around the velocity guess [px]")
     predict_px: PosFloat = Field(1.5, description="search radius around extrapolated positions (initialisation) [px]")
-    max_shake_px: PosFloat = Field(2.0, description="a shaken particle farther than this from its prediction ends "
-                                                    "its track [px] (1 px ended true tracks at 0.1 ppp: 80 % yield "
-                                                    "against 84 % at 2 px)")
+    max_shake_px: PosFloat = Field(1.0, description="a shaken particle farther than this from its prediction ends "
+                                                    "its track [px]")
     velocity_guess_mm_s: Vec3 | None = Field(None, description="velocity guess of the initial linking [mm/s]")
     shake_iterations: Annotated[int, Field(ge=1, le=50)] = Field(4, description="shaking per frame")
     min_intensity: Annotated[float, Field(gt=0, lt=1)] = Field(0.1, description="particles below this fraction of "
