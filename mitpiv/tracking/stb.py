@@ -298,8 +298,8 @@ def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_
         shake with the particles IPR found in the residual, not after its own first shake in
         the full images, where the light of its untracked neighbours pulls it; the particle
         of a failed track joins the untracked ones. Off by default: on the rendered 0.1-ppp
-        sequence it ended fewer tracks at first but lowered the yield (72.1 against 75.2 %
-        over 16 frames with ``max_shake_px`` = 1, docs/guide.md).
+        sequence it lowered the yield before ``capped_residual`` (72.1 against 75.2 %) and
+        is neutral with it (94.9 against 94.7 %, docs/guide.md).
     link_from_tracks : new chains start from the median velocity of the nearest tracks (up to
         8 within 20 px, at least 3) instead of ``velocity_guess`` where there are such tracks.
     camera_gain : every shake uses the per-camera gain IPR measured on the first frame's
