@@ -46,23 +46,23 @@ from mitpiv.io import read_json
 from mitpiv.studies.runner import load_experiment
 from mitpiv.studies.shared import bounds_of, frame_images
 from mitpiv.studies.kinds.tracking.scoring import load_cameras
-from mitpiv.tracking import OTF, stb
+from mitpiv.studies.kinds.tracking import track_images
+from mitpiv.tracking import OTF
 cfg = load_experiment(sys.argv[5], json.loads(sys.argv[6]))
 cams = load_cameras(run)
 otf = OTF.from_dict(read_json(Path(sys.argv[7])))
 lo, hi = bounds_of(cfg)
 seq = [frame_images(run, f)[0] for f in range(frames)]
-t = cfg.tracking
-kw = dict(dt_s=cfg.flow.dt_s, lower_mm=lo, upper_mm=hi, search_px=t.search_px, predict_px=t.predict_px,
-          velocity_guess=t.velocity_guess_mm_s, shake_iterations=t.shake_iterations, min_intensity=t.min_intensity,
-          ipr_options={"tolerance_px": t.tolerance_px, "outer_loops": t.outer_loops, "reduced_loops": t.reduced_loops},
-          regularise_window=t.regularise_window)
-stb(seq[:4], cams, otf, **kw)  # compile the kernels before the clock starts
+
+def stb(seq, cams, otf):  # the track stage's call: the experiment's [tracking], the code's own defaults
+    return track_images(seq, cams, otf, dt_s=cfg.flow.dt_s, lower_mm=lo, upper_mm=hi, tracking=cfg.tracking)
+
+stb(seq[:4], cams, otf)  # compile the kernels before the clock starts
 prof = cProfile.Profile() if profile else None
 t0 = time.perf_counter()
 if prof:
     prof.enable()
-tr = stb(seq, cams, otf, **kw)
+tr = stb(seq, cams, otf)
 if prof:
     prof.disable()
 wall = time.perf_counter() - t0

@@ -107,6 +107,16 @@ class Tracks:
 
 
 # ---------------------------------------------------------------------- linking
+def _guess_at(velocity_guess, p):
+    """The velocity guess at points ``p`` (N, 3) [mm/s]: zero, a constant or ``v(p)``."""
+    p = np.asarray(p, dtype=np.float64).reshape(-1, 3)
+    if velocity_guess is None:
+        return np.zeros_like(p)
+    if callable(velocity_guess):
+        return np.asarray(velocity_guess(p), dtype=np.float64).reshape(-1, 3)
+    return np.broadcast_to(np.asarray(velocity_guess, dtype=np.float64).reshape(1, 3), p.shape).copy()
+
+
 def _greedy_unique(chains, cost):
     """Keep chains in order of increasing cost so that no particle is used twice."""
     order = np.argsort(cost, kind="stable")
@@ -154,12 +164,7 @@ def link_four(frames, *, search_mm: float, predict_mm: float, velocity_guess=Non
         return np.zeros((0, 4), np.int64)
     rs = check_positive("search_mm", search_mm, owner="link_four", unit="mm")
     rp = check_positive("predict_mm", predict_mm, owner="link_four", unit="mm")
-    if velocity_guess is None:
-        guess = f[0]
-    elif callable(velocity_guess):
-        guess = f[0] + np.asarray(velocity_guess(f[0]), dtype=np.float64) * dt_s
-    else:
-        guess = f[0] + np.asarray(velocity_guess, dtype=np.float64).reshape(1, 3) * dt_s
+    guess = f[0] + _guess_at(velocity_guess, f[0]) * dt_s
     m = cKDTree(guess).sparse_distance_matrix(cKDTree(f[1]), rs, output_type="coo_matrix")
     chains = np.stack([m.row, m.col], axis=1).astype(np.int64)
     for k in (2, 3):
@@ -256,16 +261,6 @@ def regularise(tracks: Tracks, *, half_window: int = 3, order: int = 2) -> Track
 
 
 # ---------------------------------------------------------------------- STB
-def _guess_at(velocity_guess, p):
-    """The velocity guess at points ``p`` (N, 3) [mm/s]: zero, a constant or ``v(p)``."""
-    p = np.asarray(p, dtype=np.float64).reshape(-1, 3)
-    if velocity_guess is None:
-        return np.zeros_like(p)
-    if callable(velocity_guess):
-        return np.asarray(velocity_guess(p), dtype=np.float64).reshape(-1, 3)
-    return np.broadcast_to(np.asarray(velocity_guess, dtype=np.float64).reshape(1, 3), p.shape).copy()
-
-
 def stb(sequence, cameras, otf: OTF, *, dt_s: float, lower_mm, upper_mm, search_px: float = 10.0,
         predict_px: float = 1.5, max_shake_px: float = 1.0, velocity_guess=None, shake_iterations: int = 4,
         min_intensity: float = 0.1, threshold=None, ipr_options: dict | None = None,
