@@ -39,7 +39,7 @@ __all__ = ["RENDER_PACKAGES", "Stage", "StageContext", "Kind", "SceneTable", "fl
            "scene_cameras", "check_coverage", "SceneRig", "scene_rig", "load_scene_rig", "sheet_region", "sheet_focus",
            "check_sheet_focus",
            "resolve_table_file", "scene_files", "truth_file", "TRUTH_STAGES", "read_run_record", "count_for_density", "frame_files", "images", "frame_images",
-           "volume", "read_tracks", "run_truth", "grid_of", "source_of", "bounds_of", "null_metrics", "flatten",
+           "volume", "read_tracks", "run_truth", "grid_of", "source_of", "sensor_table", "sensor_stage", "bounds_of", "null_metrics", "flatten",
            "fmt_metric", "pareto_front"]
 
 # ------------------------------------------------------------------------------- the kind protocol
@@ -704,6 +704,62 @@ def grid_of(cfg):
 def source_of(cfg) -> str:
     """The stage whose images a tomo run reconstructs: ``sensor`` with a [sensor] table, else ``render``."""
     return "sensor" if cfg.sensor is not None else "render"
+
+
+@cache
+def sensor_table():
+    """The ``[sensor]`` table of the kinds that render (the tomo and tracking kinds): the
+    camera sensor model :class:`mitpiv.imaging.SensorModel`, built from its signature."""
+    from mitpiv.imaging import SensorModel
+
+    base = model_from_signature("SensorTable", SensorModel, doc="The camera sensor model (mitpiv.imaging.SensorModel).")
+
+    class SensorTable(base):
+        @model_validator(mode="after")
+        def _physics(self):
+            SensorModel(**self.model_dump())  # its own range checks (ConfigError -> ValueError)
+            noise = [k for k in ("gaussian_noise_percent", "read_noise_e") if getattr(self, k)] + (
+                ["dark_current_e_per_s"] if self.dark_current_e_per_s * self.exposure_time_s else [])
+            if (self.bit_depth is not None and noise and self.exposure is None and self.peak_photons is None
+                    and self.illumination_time_s is None):
+                raise ValueError(
+                    f"bit_depth = {self.bit_depth} with noise ({', '.join(noise)}) but no 'exposure', 'peak_photons' or "
+                    f"'illumination_time_s': the rendered radiance (~1e-5) would be taken as photons and round to 0 "
+                    f"counts, leaving images of pure noise; give peak_photons (e.g. 2000), exposure or "
+                    f"illumination_time_s")
+            return self
+
+    SensorTable.__doc__ = base.__doc__
+    return SensorTable
+
+
+def sensor_stage(ctx: StageContext, frames) -> dict:
+    """The ``sensor`` stage: the rendered images of ``frames`` turned into counts by the
+    experiment's ``[sensor]`` model (:func:`mitpiv.imaging.apply_sensor_set`, one exposure for
+    the whole set), one EXR per camera and frame with the sensor's metadata."""
+    from mitpiv.imaging import SensorModel, apply_sensor_set
+    from mitpiv.io import write_exr
+    from mitpiv.photometry import cameras_from_metadata, wavelength_from_metadata
+
+    cfg = ctx.cfg
+    model = SensorModel(**cfg.sensor.model_dump())
+    rendered, metas, names = {}, {}, {}
+    for frame in frames:
+        imgs, ms, files = images(ctx.run_dir, frame, "render")
+        for img, meta, f in zip(imgs, ms, files, strict=True):
+            key = (meta.get("sensor_id") or f.stem.rsplit("_frame", 1)[0], frame)
+            rendered[key], metas[key], names[key] = img, meta, f.name
+    # each camera's counts follow its aperture (photometry "auto": when every camera states one)
+    by_cam = {k[0]: metas[k] for k in metas}
+    cameras = None if model.photometry == "image" else cameras_from_metadata(by_cam)
+    # every image without particle signal (no exposure: radiance rounds to 0 counts) is refused
+    res = apply_sensor_set(rendered, model, seed=cfg.seed, progress=ctx.progress, on_degenerate="raise",
+                           cameras=cameras, wavelength_nm=wavelength_from_metadata(list(metas.values())))
+    for key, c in res.counts.items():
+        write_exr(ctx.out / names[key], np.asarray(c, dtype=np.float32),
+                  {**metas[key], "sensor": res.metadata(key)})
+    return {"exposure": res.exposure, "exposure_units": res.exposure_units, "photometry": res.photometry,
+            "etendue_axis": res.etendue_axis, "scene_peak": res.scene_peak, "noise_peak_counts": res.noise_peak_counts}
 
 
 def bounds_of(cfg) -> tuple[np.ndarray, np.ndarray]:

@@ -398,7 +398,7 @@ def _cell_medians(out, k, pp, fits, n, lo, hi):
 
 
 def refine_otf(images, cameras, otf: OTF, positions_mm, intensities, *, subvolumes=None, window_px: int = 2,
-               isolation_px: float = 2.0, min_particles: int = 5) -> OTF:
+               isolation_px: float = 2.0, min_particles: int = 5, camera_gain=None) -> OTF:
     """Re-fit the OTF on augmented residual images (Schanz et al. 2013): each particle's
     window is the image minus the model images of all particles plus its own, so its
     neighbours' light no longer widens the fit, as it does in a dense image where few
@@ -416,6 +416,11 @@ def refine_otf(images, cameras, otf: OTF, positions_mm, intensities, *, subvolum
     isolation_px : particles with another particle's projection closer than this [px] are
         not fitted (their images merge).
     min_particles : fewest fitted particles a camera needs (else :class:`CalibrationError`).
+    camera_gain : (n_cameras,) factors on each camera's model images, as the tracker measured
+        them against ``otf`` (:func:`~mitpiv.tracking.stb.stb`'s ``history[0]["camera_gain"]``;
+        default 1). Without them a camera whose particles are brighter than the OTF says keeps
+        part of every neighbour in the residual, and its fit widens. The new OTF's peak takes
+        the gain in.
 
     Returns
     -------
@@ -433,12 +438,19 @@ def refine_otf(images, cameras, otf: OTF, positions_mm, intensities, *, subvolum
         raise ConfigError(f"refine_otf: 'window_px' must be an integer >= 1, got {window_px!r}.")
     iso = check_positive("isolation_px", isolation_px, owner="refine_otf", unit="px")
     n = otf.a.shape[1:] if subvolumes is None else _subvolumes(subvolumes, "refine_otf")
+    if camera_gain is None:
+        gain = np.ones(len(cameras))
+    else:
+        gain = np.asarray(camera_gain, dtype=np.float64).ravel()
+        if gain.shape != (len(cameras),) or not np.all(np.isfinite(gain)) or np.any(gain <= 0):
+            raise ConfigError(f"refine_otf: 'camera_gain' must hold one positive factor per camera ({len(cameras)}), "
+                              f"got {camera_gain!r}.")
     lo, hi = otf.lower_mm, otf.upper_mm
     shape = (len(cameras),) + tuple(n)
     out = {k: np.zeros(shape) for k in ("a", "b", "c", "peak")}
     residuals = project_particles(p, e, cameras, otf)
     for k, (img, cam) in enumerate(zip(images, cameras, strict=True)):
-        res = np.asarray(img, dtype=np.float64) - residuals[k]
+        res = np.asarray(img, dtype=np.float64) - gain[k] * residuals[k]
         vis = cam.visible(p) & (e > 0)
         uv = cam.project(p[vis])
         pv, ev = p[vis], e[vis]
@@ -449,7 +461,7 @@ def refine_otf(images, cameras, otf: OTF, positions_mm, intensities, *, subvolum
         w, hh = cam.resolution
         keep &= (uv[:, 0] > h + 1) & (uv[:, 0] < w - h - 1) & (uv[:, 1] > h + 1) & (uv[:, 1] < hh - h - 1)
         oa, ob, oc, opk = otf.params(k, pv[keep])
-        a, b, c, _, pk, ok = _fit_blobs(res, uv[keep], h, own=(oa, ob, oc, opk * ev[keep]))
+        a, b, c, _, pk, ok = _fit_blobs(res, uv[keep], h, own=(oa, ob, oc, gain[k] * opk * ev[keep]))
         pk = pk / ev[keep]
         ok &= np.isfinite(pk) & (pk > 0)
         if ok.sum() < min_particles:

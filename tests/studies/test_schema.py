@@ -183,13 +183,15 @@ def test_image_smoothing_is_a_checked_reconstruction_key():
 def test_the_sensor_table_has_a_meaning_for_every_key():
     """The [sensor] table is generated from SensorModel's signature; each key's meaning comes
     from its docstring's Attributes section (it was empty for all of them)."""
-    from mitpiv.studies.kinds.tomo import _sensor_table
+    from mitpiv.studies.shared import sensor_table
     from mitpiv.studies.schema import docstring_meanings
 
-    fields = _sensor_table().model_fields
+    fields = sensor_table().model_fields
     assert {k for k, f in fields.items() if not f.description} == set()
     assert "per watt" in fields["exposure"].description and "[electrons RMS]" in fields["read_noise_e"].description
-    assert "| `quantum_efficiency` | float | 1.0 |" in describe(get_kind("tomo").schema) and "Electrons per photon" in \
+    for kind in ("tomo", "tracking"):  # both kinds that render take the one table
+        assert "| `quantum_efficiency` | float | 1.0 |" in describe(get_kind(kind).schema)
+    assert "Electrons per photon" in \
         describe(get_kind("tomo").schema)
     doc = "Title.\n\nParameters\n----------\na, b : float\n    Two lengths [mm],\n    in order.\nc : int\n\nNotes\n-----\nx : y\n"
     assert docstring_meanings(doc) == {"a": "Two lengths [mm], in order.", "b": "Two lengths [mm], in order.",

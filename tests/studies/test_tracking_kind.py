@@ -290,9 +290,44 @@ def test_openlpt_and_tomo_on_the_same_images_and_the_study_table(tiny, tmp_path)
     for metric, _, _ in METRICS:
         assert (tmp_path / "docs" / f"{metric}.png").stat().st_size > 1000, metric
     report = (tmp_path / "docs" / "report.md").read_text()
-    for m in ("mitpiv-stb", "openlpt-stb", "mitpiv-tomo"):
-        assert sum(line.split("|")[2].strip() == m for line in report.splitlines() if line.startswith("| ")) == 1, m
+    for m in ("mitpiv-stb", "openlpt-stb", "mitpiv-tomo"):  # once over the seeds, once as its run
+        assert sum(line.split("|")[2].strip() == m for line in report.splitlines() if line.startswith("| ")) == 2, m
     assert f"| {rows['mitpiv-stb']['yield']:.3f} |" in report
+    # one seed: the summary is the run itself, without an interval
+    summ = {e["method"]: e for e in doc["summary"]}
+    assert summ["mitpiv-stb"]["n"] == 1 and summ["mitpiv-stb"]["yield"] == rows["mitpiv-stb"]["yield"]
+    assert summ["mitpiv-stb"]["yield_ci"] is None
+    assert rows["mitpiv-stb"]["acceleration_error"] == res2["evaluate"]["acceleration_error_rel"]
+    assert rows["mitpiv-stb"]["wall_per_frame_s"] == pytest.approx(rows["mitpiv-stb"]["wall_s"] / 6)
+    assert rows["mitpiv-tomo"]["wall_per_frame_s"] == pytest.approx(rows["mitpiv-tomo"]["wall_s"] / 2)
+
+
+def test_the_study_summary_is_the_mean_and_t_interval_over_seeds():
+    """study_summary against numpy / scipy on three seeds of hand-made rows: the mean, the
+    Student-t 95 % interval (t_0.975,2 = 4.303), a failed seed counted and not averaged, and a
+    density with one seed left without an interval."""
+    from scipy import stats
+
+    from mitpiv.replications.tracking_density.study import study_rows, study_summary
+
+    table = []
+    for seed, y in ((0, 0.90), (1, 0.95), (2, 1.00)):
+        table.append({"status": "ok", "param.seeding.ppp": 0.1, "param.seed": seed, "frames": 50, "yield": y,
+                      "ghost_fraction": 0.01, "acceleration_error_rel": 0.2, "seconds.otf": 1.0,
+                      "seconds.track": 99.0})
+    table.append({"status": "failed", "error": "out of memory", "param.seeding.ppp": 0.1, "param.seed": 3})
+    table.append({"status": "ok", "param.seeding.ppp": 0.2, "param.seed": 0, "frames": 50, "yield": 0.5,
+                  "seconds.otf": 1.0, "seconds.track": 199.0})
+    rows = study_rows(table)
+    summ = {e["ppp"]: e for e in study_summary(rows)}
+    e = summ[0.1]
+    vals = np.array([0.90, 0.95, 1.00])
+    half = stats.t.ppf(0.975, 2) * vals.std(ddof=1) / np.sqrt(3)
+    assert e["n"] == 3 and e["seeds"] == [0, 1, 2] and e["failed"] == [3]
+    assert e["yield"] == pytest.approx(0.95) and half == pytest.approx(4.303 * 0.05 / np.sqrt(3), rel=1e-3)
+    assert e["yield_ci"] == pytest.approx([0.95 - half, 0.95 + half])
+    assert e["wall_per_frame_s"] == pytest.approx(2.0) and e["acceleration_error"] == pytest.approx(0.2)
+    assert summ[0.2]["n"] == 1 and summ[0.2]["yield_ci"] is None and summ[0.2]["wall_per_frame_s"] == pytest.approx(4.0)
 
 
 def test_an_openlpt_failure_is_a_row_with_its_reason(tiny, tmp_path):
@@ -436,3 +471,38 @@ def test_otf_calibration_pools_more_frames_when_the_first_hold_too_few(tiny, tmp
     assert o["sigma_max_px"] == pytest.approx(res.stages["otf"]["sigma_max_px"], rel=0.15)
     with pytest.raises(CalibrationError, match=r'too dense .*\[otf\] source = "file"'):
         run_config(load_experiment(TINY, {"otf.window_px": 6, "otf.frames": 1}), run, until="otf")
+
+
+def test_a_sensor_table_tracks_noisy_counts_less_the_black_level(tiny, tmp_path):
+    """[sensor] puts the camera between the rendering and the trackers: the sensor stage
+    turns the radiance into 12-bit counts with photon and read noise over a black level of
+    100 counts, and the OTF and track stages read those counts less the black level (the
+    rendering is not redone). 2000 photons at the brightest particle and 3 e- of read noise
+    leave the median particle image far above the noise, so the noise-free thresholds hold;
+    the position bound doubles for the photon noise."""
+    import shutil
+
+    from mitpiv.studies.kinds.tracking.scoring import tracked_images
+    from mitpiv.studies.runner import run_config
+    from mitpiv.studies.shared import frame_images
+
+    res, out = tiny
+    run = tmp_path / "run"
+    shutil.copytree(out, run)
+    sensor = {"sensor.peak_photons": 2000.0, "sensor.shot_noise": True, "sensor.read_noise_e": 3.0,
+              "sensor.black_level": 100.0, "sensor.bit_depth": 12, "sensor.photometry": "image"}
+    cfg = load_experiment(TINY, sensor)
+    res2 = run_config(cfg, run)
+    assert res2.timings["render"] == res.timings["render"]  # the rendering is reused
+    counts, metas = frame_images(run, 2, "sensor")
+    seen = tracked_images(cfg, run, 2)
+    rendered, _ = frame_images(run, 2, "render")
+    for c, s, r, m in zip(counts, seen, rendered, metas, strict=True):
+        assert "sensor" in m and np.all(c == np.round(c)) and c.max() <= 4095
+        assert np.allclose(s, c - 100.0)
+        # background: the black level and read noise (3 counts at 1 e-/count), not the radiance
+        bg = c[r < 1e-3 * r.max()]
+        assert abs(np.median(bg) - 100.0) < 2.0 and 2.0 < bg.std() < 4.5
+    ev = res2["evaluate"]
+    assert ev["yield"] > MIN_YIELD and ev["ghost_fraction"] < MAX_GHOSTS
+    assert ev["position_error_px"] < 2 * MAX_POSITION_ERROR_PX

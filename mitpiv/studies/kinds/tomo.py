@@ -42,7 +42,7 @@ from pydantic import Field, model_validator
 
 from mitpiv.costs import MAX_ITERATIONS
 from mitpiv.errors import ConfigError
-from mitpiv.studies.schema import Table, Vec3, model_from_signature
+from mitpiv.studies.schema import Table, Vec3
 from mitpiv.studies.shared import (
     RENDER_PACKAGES,
     Kind,
@@ -62,6 +62,8 @@ from mitpiv.studies.shared import (
     resolve_scene_xml,
     resolve_table_file,
     scene_files,
+    sensor_stage,
+    sensor_table,
     source_of,
     volume,
 )
@@ -146,31 +148,6 @@ class RenderTable(Table):
         None, description="samples per pixel (camera tracing) or passes (particle tracer); default the scene's")
     sensors: Annotated[list[str], Field(min_length=1)] | None = Field(
         None, description="ids of the scene's sensors to render (default all)")
-
-
-@cache
-def _sensor_table():
-    from mitpiv.imaging import SensorModel
-
-    base = model_from_signature("SensorTable", SensorModel, doc="The camera sensor model (mitpiv.imaging.SensorModel).")
-
-    class SensorTable(base):
-        @model_validator(mode="after")
-        def _physics(self):
-            SensorModel(**self.model_dump())  # its own range checks (ConfigError -> ValueError)
-            noise = [k for k in ("gaussian_noise_percent", "read_noise_e") if getattr(self, k)] + (
-                ["dark_current_e_per_s"] if self.dark_current_e_per_s * self.exposure_time_s else [])
-            if (self.bit_depth is not None and noise and self.exposure is None and self.peak_photons is None
-                    and self.illumination_time_s is None):
-                raise ValueError(
-                    f"bit_depth = {self.bit_depth} with noise ({', '.join(noise)}) but no 'exposure', 'peak_photons' or "
-                    f"'illumination_time_s': the rendered radiance (~1e-5) would be taken as photons and round to 0 "
-                    f"counts, leaving images of pure noise; give peak_photons (e.g. 2000), exposure or "
-                    f"illumination_time_s")
-            return self
-
-    SensorTable.__doc__ = base.__doc__
-    return SensorTable
 
 
 class ReconstructionTable(Table):
@@ -356,7 +333,7 @@ def schema():
         "seeding": (SeedingTable, Field(..., description="particle seeding")),
         "flow": (_flow_union(), Field(..., description="the flow (kind and its parameters) and dt_s")),
         "render": (RenderTable, Field(default_factory=RenderTable, description="rendering")),
-        "sensor": (_sensor_table() | None, Field(None, description="sensor model (optional)")),
+        "sensor": (sensor_table() | None, Field(None, description="sensor model (optional)")),
         "reconstruction": (ReconstructionTable, Field(..., description="volume reconstruction")),
         "piv": (PivTable, Field(default_factory=PivTable, description="3D PIV")),
         "particles": (ParticlesTable, Field(default_factory=ParticlesTable, description="particle evaluation")),
@@ -462,29 +439,7 @@ def camera_budget(metas: list[dict]) -> dict:
 
 
 def stage_sensor(ctx: StageContext) -> dict:
-    from mitpiv.imaging import SensorModel, apply_sensor_set
-    from mitpiv.io import write_exr
-    from mitpiv.photometry import cameras_from_metadata, wavelength_from_metadata
-
-    cfg = ctx.cfg
-    model = SensorModel(**cfg.sensor.model_dump())
-    rendered, metas, names = {}, {}, {}
-    for frame in FRAMES:
-        imgs, ms, files = images(ctx.run_dir, frame, "render")
-        for img, meta, f in zip(imgs, ms, files, strict=True):
-            key = (meta.get("sensor_id") or f.stem.rsplit("_frame", 1)[0], frame)
-            rendered[key], metas[key], names[key] = img, meta, f.name
-    # each camera's counts follow its aperture (photometry "auto": when every camera states one)
-    by_cam = {k[0]: metas[k] for k in metas}
-    cameras = None if model.photometry == "image" else cameras_from_metadata(by_cam)
-    # every image without particle signal (no exposure: radiance rounds to 0 counts) is refused
-    res = apply_sensor_set(rendered, model, seed=cfg.seed, progress=ctx.progress, on_degenerate="raise",
-                           cameras=cameras, wavelength_nm=wavelength_from_metadata(list(metas.values())))
-    for key, c in res.counts.items():
-        write_exr(ctx.out / names[key], np.asarray(c, dtype=np.float32),
-                  {**metas[key], "sensor": res.metadata(key)})
-    return {"exposure": res.exposure, "exposure_units": res.exposure_units, "photometry": res.photometry,
-            "etendue_axis": res.etendue_axis, "scene_peak": res.scene_peak, "noise_peak_counts": res.noise_peak_counts}
+    return sensor_stage(ctx, FRAMES)
 
 
 def _undistorted(meta: dict) -> dict:

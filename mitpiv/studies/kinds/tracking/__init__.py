@@ -14,6 +14,8 @@ Experiment file (paths relative to it; ``mitpiv schema --kind tracking`` lists e
     [flow]         kind = "uniform" | "solid_body" | ... | "channel" (mitpiv.physics.flows), dt_s
     [sequence]     frames (N), substeps (RK4 steps per frame)
     [render]       spp, sensors, workers (frames in parallel), chunk_frames
+    [sensor]       the camera sensor (mitpiv.imaging.SensorModel: peak_photons, shot_noise,
+                   read_noise_e, bit_depth, ...); optional, none: the tracker sees the radiance
     [calibration]  model = "true" | "pinhole" (a fit to a noisy virtual target), noise_px
     [otf]          source = "images" | "truth", subvolumes, window_px, frames
     [tracking]     bounds_mm, tolerance_px, search_px, ... (mitpiv.tracking.stb.stb)
@@ -24,7 +26,9 @@ Experiment file (paths relative to it; ``mitpiv schema --kind tracking`` lists e
 
 Stages: ``field`` (seeding and advection, :func:`mitpiv.physics.sequence.advect_sequence`;
 one PLY per frame and the truth in the one truth format, with identities, velocities and
-accelerations), ``render`` (EXR per camera and frame through
+accelerations), ``sensor`` (with a ``[sensor]`` table: counts per camera and frame,
+:func:`mitpiv.studies.shared.sensor_stage`; every later stage reads them less the black level,
+:func:`~mitpiv.studies.kinds.tracking.scoring.tracked_images`), ``render`` (EXR per camera and frame through
 :func:`mitpiv.render.render.render_scene`, the renderer of the tomo kind; chunks of frames in
 this process or, with ``[render] workers > 1``, on a local Dask cluster of processes, as
 ``mitpiv sweep`` runs its points), ``calibrate`` (the cameras: the rendered images' own
@@ -64,7 +68,7 @@ from mitpiv.errors import CalibrationError, ConfigError
 from mitpiv.studies.kinds.tracking.compare import CompareTable
 from mitpiv.studies.kinds.tracking.compare import stages as compare_stages
 from mitpiv.studies.kinds.tracking.compare import summary as compare_summary
-from mitpiv.studies.kinds.tracking.scoring import load_cameras, score_tracks, write_tracks_npz
+from mitpiv.studies.kinds.tracking.scoring import load_cameras, score_tracks, tracked_images, write_tracks_npz
 from mitpiv.studies.schema import Table, Vec3
 from mitpiv.studies.shared import (
     RENDER_PACKAGES,
@@ -85,6 +89,8 @@ from mitpiv.studies.shared import (
     resolve_table_file,
     run_truth,
     scene_files,
+    sensor_stage,
+    sensor_table,
 )
 
 PosFloat = Annotated[float, Field(gt=0)]
@@ -274,6 +280,8 @@ def schema():
         "flow": (_flow_union(), Field(..., description="the flow (kind and its parameters) and dt_s")),
         "sequence": (SequenceTable, Field(..., description="the time-resolved sequence")),
         "render": (RenderTable, Field(default_factory=RenderTable, description="rendering")),
+        "sensor": (sensor_table() | None, Field(None, description="sensor model: photon and read noise, gain, bit "
+                                                                  "depth (optional; none: the rendered radiance)")),
         "calibration": (CalibrationTable, Field(default_factory=CalibrationTable, description="camera calibration")),
         "otf": (OtfTable, Field(default_factory=OtfTable, description="particle image model calibration")),
         "tracking": (TrackingTable, Field(default_factory=TrackingTable, description="Shake-The-Box")),
@@ -397,6 +405,10 @@ def stage_render(ctx: StageContext) -> dict:
     return {"images": len(names), "chunks": len(chunks), "workers": r.workers}
 
 
+def stage_sensor(ctx: StageContext) -> dict:
+    return sensor_stage(ctx, range(ctx.cfg.sequence.frames))
+
+
 def stage_calibrate(ctx: StageContext) -> dict:
     from mitpiv.io import camera_from_metadata
     from mitpiv.reconstruct.calibration import calibrate
@@ -468,7 +480,7 @@ def stage_otf(ctx: StageContext) -> dict:
 
     def load(n):  # the first n frames' images and fitted positions
         for f in range(len(imgs_all), n):
-            imgs, _ = frame_images(ctx.run_dir, f)
+            imgs = tracked_images(cfg, ctx.run_dir, f)
             if o.source == "truth":
                 p = truth["positions_mm"][f]
                 p = p[np.all(np.isfinite(p), axis=1)]
@@ -570,7 +582,7 @@ def stage_track(ctx: StageContext) -> dict:
     lo, hi = bounds_of(cfg)
     ids = (ctx.results.get("calibrate") or {}).get("cameras") or [f"camera{i}" for i in range(len(cams))]
     check_track_coverage(cfg, dict(zip(ids, cams, strict=True)))  # what --check did, with the calibrated cameras
-    seq = [frame_images(ctx.run_dir, f)[0] for f in range(cfg.sequence.frames)]
+    seq = [tracked_images(cfg, ctx.run_dir, f) for f in range(cfg.sequence.frames)]
     fit = [e for e in (ctx.results.get("calibrate") or {}).get("fit_rms_px") or [] if e is not None]
     tr = track_images(seq, cams, otf, dt_s=cfg.flow.dt_s, lower_mm=lo, upper_mm=hi, tracking=cfg.tracking,
                       calibration_error_px=max(fit) if fit else None, progress=ctx.progress)
@@ -635,6 +647,7 @@ def stages(cfg) -> list[Stage]:
                  files=scene_files if dens else None, packages=RENDER_PACKAGES if dens else ()),
            Stage("render", ("scene", "render"), stage_render, files=scene_files, packages=RENDER_PACKAGES,
                  check=check_scene_sensors, rig_check=check_sheet_in_focus),
+           *([Stage("sensor", ("sensor",), stage_sensor)] if cfg.sensor is not None else []),
            Stage("calibrate", ("calibration",), stage_calibrate),
            Stage("otf", ("otf", "tracking"), stage_otf),
            Stage("track", ("tracking", "flow"), stage_track, scene_check=check_track_coverage),

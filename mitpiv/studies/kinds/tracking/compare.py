@@ -125,11 +125,12 @@ from mitpiv.studies.kinds.tracking.scoring import (
     eulerian_grid,
     load_cameras,
     score_tracks,
+    tracked_images,
     truth_tracks,
     write_tracks_npz,
 )
 from mitpiv.studies.schema import Table
-from mitpiv.studies.shared import Stage, StageContext, bounds_of, frame_images, null_metrics
+from mitpiv.studies.shared import Stage, StageContext, bounds_of, null_metrics
 
 PosFloat = Annotated[float, Field(gt=0)]
 Window = Annotated[int, Field(ge=4)] | tuple[Annotated[int, Field(ge=4)], Annotated[int, Field(ge=4)],
@@ -341,7 +342,7 @@ def stage_tomo(ctx: StageContext) -> dict:
                        what=f"[compare] tomo_windows = {list(c.tomo_windows)}, tomo_overlap = {c.tomo_overlap}",
                        fix="use a smaller overlap or larger windows")
     tw = time.perf_counter()
-    _warm_up(frame_images(run, 0)[0], maps, grid, c.tomo_method)
+    _warm_up(tracked_images(cfg, run, 0), maps, grid, c.tomo_method)
     warm_s = time.perf_counter() - tw
     t0 = time.perf_counter()
     cache = WeightCache()
@@ -350,7 +351,7 @@ def stage_tomo(ctx: StageContext) -> dict:
     prev = None
     for f in range(pairs + 1):
         ta = time.perf_counter()
-        vol, inf = reconstruct_volume(frame_images(run, f)[0], maps, grid, c.tomo_method,
+        vol, inf = reconstruct_volume(tracked_images(cfg, run, f), maps, grid, c.tomo_method,
                                       iterations=c.tomo_iterations, progress=ctx.progress, cache=cache)
         recon_s += time.perf_counter() - ta
         if inf.get("residuals"):

@@ -1,7 +1,7 @@
 """The tracks of a tracking run and their scores, for the kind's evaluate stage
 (:mod:`mitpiv.studies.kinds.tracking`) and its ``[compare]`` stages
 (:mod:`mitpiv.studies.kinds.tracking.compare`) alike: the cameras the tracker uses
-(:func:`load_cameras`), the tracks file (:func:`write_tracks_npz`), the true trajectories as
+(:func:`load_cameras`), the images they read (:func:`tracked_images`), the tracks file (:func:`write_tracks_npz`), the true trajectories as
 tracks (:func:`truth_tracks`), the LPT Challenge's scoring (:func:`score_tracks`) and the
 Eulerian binning every method's velocities are compared on (:func:`eulerian_grid`,
 :func:`binned_error`)."""
@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mitpiv.studies.shared import bounds_of, run_truth
+from mitpiv.studies.shared import bounds_of, frame_images, run_truth, source_of
 
-__all__ = ["load_cameras", "write_tracks_npz", "truth_tracks", "eulerian_grid", "binned_error", "score_tracks"]
+__all__ = ["load_cameras", "tracked_images", "write_tracks_npz", "truth_tracks", "eulerian_grid", "binned_error", "score_tracks"]
 
 
 def load_cameras(run: Path) -> list:
@@ -22,6 +22,16 @@ def load_cameras(run: Path) -> list:
     from mitpiv.io import camera_from_metadata, read_json
 
     return [camera_from_metadata(c) for c in read_json(run / "calibrate" / "cameras.json")["cameras"]]
+
+
+def tracked_images(cfg, run: Path, frame: int) -> list[np.ndarray]:
+    """The images of one frame that the trackers read: the ``sensor`` stage's counts less the
+    black level when the experiment has a ``[sensor]`` table (a camera's background
+    subtraction), else the rendered radiance."""
+    imgs, _ = frame_images(run, frame, source_of(cfg))
+    if cfg.sensor is not None and cfg.sensor.black_level:
+        imgs = [i - float(cfg.sensor.black_level) for i in imgs]
+    return imgs
 
 
 def write_tracks_npz(path, tracks) -> Path:
