@@ -490,7 +490,8 @@ def test_a_sensor_table_tracks_noisy_counts_less_the_black_level(tiny, tmp_path)
     run = tmp_path / "run"
     shutil.copytree(out, run)
     sensor = {"sensor.peak_photons": 2000.0, "sensor.shot_noise": True, "sensor.read_noise_e": 3.0,
-              "sensor.black_level": 100.0, "sensor.bit_depth": 12, "sensor.photometry": "image"}
+              "sensor.black_level": 100.0, "sensor.bit_depth": 12, "sensor.photometry": "image",
+              "compare.openlpt": True}
     cfg = load_experiment(TINY, sensor)
     res2 = run_config(cfg, run)
     assert res2.timings["render"] == res.timings["render"]  # the rendering is reused
@@ -506,3 +507,13 @@ def test_a_sensor_table_tracks_noisy_counts_less_the_black_level(tiny, tmp_path)
     ev = res2["evaluate"]
     assert ev["yield"] > MIN_YIELD and ev["ghost_fraction"] < MAX_GHOSTS
     assert ev["position_error_px"] < 2 * MAX_POSITION_ERROR_PX
+    # OpenLPT reads the same counts less the black level: its exported background is dark
+    import tifffile
+
+    lpt = res2.stages["openlpt"]
+    assert lpt["status"] == "ok", lpt["error"]
+    assert lpt["yield"] > OPENLPT_MIN_YIELD and lpt["ghost_fraction"] < MAX_GHOSTS
+    tif = sorted((run / "openlpt" / "export").rglob("*.tif"))
+    assert tif
+    t = tifffile.imread(tif[0]).astype(float)
+    assert np.median(t) < 0.01 * t.max()  # without the subtraction: 100 counts of ~1000 at the peak

@@ -253,7 +253,12 @@ def stage_openlpt(ctx: StageContext) -> dict:
     info = {"export_s": None, "voxel_mm": vox, "undistorted": distorted}
     try:  # the export (a camera OpenLPT cannot represent) or the peer's run may fail
         t0 = time.perf_counter()
-        export_openlpt(folder, run_images(run)["files"], cams, lower_mm=lo, upper_mm=hi,
+        if cfg.sensor is not None and cfg.sensor.black_level:  # the counts less the black level, as STB reads them
+            per_frame = [tracked_images(cfg, run, f) for f in range(cfg.sequence.frames)]
+            frames = [[fr[k] for fr in per_frame] for k in range(len(cams))]
+        else:
+            frames = run_images(run)["files"]
+        export_openlpt(folder, frames, cams, lower_mm=lo, upper_mm=hi,
                        frame_rate_hz=1.0 / cfg.flow.dt_s, voxel_mm=vox, settings=settings, threads=c.openlpt_threads,
                        undistort=distorted, progress=ctx.progress)
         info["export_s"] = time.perf_counter() - t0
