@@ -13,14 +13,15 @@ from mitpiv.studies import load_experiment, run_config
 from mitpiv.studies.sweep import load_study
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
-STUDIES = sorted(SCENES.glob("*/study.toml"))
+STUDIES = sorted(SCENES.glob("*/study*.toml"))
 
 
 def test_study_scenes_exist():
-    assert {p.parent.name for p in STUDIES} >= {"tomo_mie", "multiplenoptic", "sa5x5", "lfpiv_jet", "backlit_droplets"}
+    assert {p.parent.name for p in STUDIES} >= {"tomo_mie", "multiplenoptic", "sa5x5", "lfpiv_jet", "backlit_droplets",
+                                               "tracking_lpt"}
 
 
-@pytest.mark.parametrize("study", STUDIES, ids=lambda p: p.parent.name)
+@pytest.mark.parametrize("study", STUDIES, ids=lambda p: f"{p.parent.name}/{p.stem}")
 @pytest.mark.parametrize("full", [False, True])
 def test_every_point_is_a_valid_experiment(study, full):
     import tomllib
