@@ -310,6 +310,8 @@ CASES = [
                                                           ("center = [0.0, -4.0, 0.0]\naxis = [0.0, 1.0, 0.0]\n", "")]),
     C("toml-8bit-noise-no-exposure", RUN + " --set sensor.bit_depth=8 --set sensor.gaussian_noise_percent=5.0",
       "exposure"),
+    # read noise in electrons on radiance of ~1e-5 "photons": refused with or without a bit depth
+    C("toml-read-noise-no-exposure", RUN + " --set sensor.read_noise_e=5.0", "peak_photons"),
     C("toml-name-empty", RUN, "name", [('name = "tomo4"', 'name = ""')]),
     C("toml-set-noeq", "run {exp} --check --set reconstruction.iterations", "--set"),
     C("toml-missing-file", "run {dir}/nothere.toml --check", "nothere.toml"),

@@ -720,8 +720,14 @@ def sensor_table():
             SensorModel(**self.model_dump())  # its own range checks (ConfigError -> ValueError)
             noise = [k for k in ("gaussian_noise_percent", "read_noise_e") if getattr(self, k)] + (
                 ["dark_current_e_per_s"] if self.dark_current_e_per_s * self.exposure_time_s else [])
-            if (self.bit_depth is not None and noise and self.exposure is None and self.peak_photons is None
-                    and self.illumination_time_s is None):
+            exposed = not (self.exposure is None and self.peak_photons is None and self.illumination_time_s is None)
+            electrons = [k for k in noise if k != "gaussian_noise_percent"]
+            if electrons and not exposed and self.bit_depth is None:
+                raise ValueError(
+                    f"{', '.join(electrons)} in electrons but no 'exposure', 'peak_photons' or 'illumination_time_s': "
+                    f"the rendered radiance (~1e-5) would be taken as photons, far below the noise; give "
+                    f"peak_photons (e.g. 2000), exposure or illumination_time_s")
+            if self.bit_depth is not None and noise and not exposed:
                 raise ValueError(
                     f"bit_depth = {self.bit_depth} with noise ({', '.join(noise)}) but no 'exposure', 'peak_photons' or "
                     f"'illumination_time_s': the rendered radiance (~1e-5) would be taken as photons and round to 0 "

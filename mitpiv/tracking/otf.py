@@ -417,8 +417,8 @@ def refine_otf(images, cameras, otf: OTF, positions_mm, intensities, *, subvolum
         not fitted (their images merge).
     min_particles : fewest fitted particles a camera needs (else :class:`CalibrationError`).
     camera_gain : (n_cameras,) factors on each camera's model images, as the tracker measured
-        them against ``otf`` (:func:`~mitpiv.tracking.stb.stb`'s ``history[0]["camera_gain"]``;
-        default 1). Without them a camera whose particles are brighter than the OTF says keeps
+        them against ``otf`` (:func:`~mitpiv.tracking.stb.stb`'s last ``history`` entry with a
+        ``camera_gain``; default 1). Without them a camera whose particles are brighter than the OTF says keeps
         part of every neighbour in the residual, and its fit widens. The new OTF's peak takes
         the gain in.
 

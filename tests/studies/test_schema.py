@@ -183,8 +183,8 @@ def test_image_smoothing_is_a_checked_reconstruction_key():
 def test_the_sensor_table_has_a_meaning_for_every_key():
     """The [sensor] table is generated from SensorModel's signature; each key's meaning comes
     from its docstring's Attributes section (it was empty for all of them)."""
-    from mitpiv.studies.shared import sensor_table
     from mitpiv.studies.schema import docstring_meanings
+    from mitpiv.studies.shared import sensor_table
 
     fields = sensor_table().model_fields
     assert {k for k, f in fields.items() if not f.description} == set()

@@ -491,7 +491,8 @@ def test_a_sensor_table_tracks_noisy_counts_less_the_black_level(tiny, tmp_path)
     shutil.copytree(out, run)
     sensor = {"sensor.peak_photons": 2000.0, "sensor.shot_noise": True, "sensor.read_noise_e": 3.0,
               "sensor.black_level": 100.0, "sensor.bit_depth": 12, "sensor.photometry": "image",
-              "compare.openlpt": True}
+              "compare.openlpt": True, "compare.tomo": True, "compare.tomo_pairs": 1, "compare.tomo_voxel_mm": 0.1,
+              "compare.tomo_windows": [16], "compare.tomo_iterations": 3}
     cfg = load_experiment(TINY, sensor)
     res2 = run_config(cfg, run)
     assert res2.timings["render"] == res.timings["render"]  # the rendering is reused
@@ -507,6 +508,10 @@ def test_a_sensor_table_tracks_noisy_counts_less_the_black_level(tiny, tmp_path)
     ev = res2["evaluate"]
     assert ev["yield"] > MIN_YIELD and ev["ghost_fraction"] < MAX_GHOSTS
     assert ev["position_error_px"] < 2 * MAX_POSITION_ERROR_PX
+    # the OTF was fitted to the counts (a peak of hundreds of counts), not to the radiance (~1e-5)
+    assert min(res2.stages["otf"]["peak"]) > 10.0 and max(res.stages["otf"]["peak"]) < 1e-2
+    # MART reads the counts less the black level clipped at 0 (negative noise pixels refused)
+    assert res2.stages["tomo"]["status"] == "ok" and res2.stages["tomo"]["binned_error_rel"] < TOMO_MAX_BINNED_ERROR
     # OpenLPT reads the same counts less the black level: its exported background is dark
     import tifffile
 
@@ -517,3 +522,8 @@ def test_a_sensor_table_tracks_noisy_counts_less_the_black_level(tiny, tmp_path)
     assert tif
     t = tifffile.imread(tif[0]).astype(float)
     assert np.median(t) < 0.01 * t.max()  # without the subtraction: 100 counts of ~1000 at the peak
+    # another read noise: the sensor stage and those after it run again, the rendering not
+    res3 = run_config(load_experiment(TINY, {**sensor, "sensor.read_noise_e": 4.0}), run)
+    assert res3.timings["render"] == res.timings["render"]
+    for st in ("sensor", "otf", "track"):
+        assert res3.timings[st] != res2.timings[st], st

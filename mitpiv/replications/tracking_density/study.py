@@ -40,8 +40,9 @@ where it has no value):
     ``ok``, or ``failed`` with the exact reason (e.g. OpenLPT's exit status and log).
 
 Summary (``results.json`` ``summary``; one entry per method and density): per metric the
-mean over the seeds' ``ok`` rows, its Student-t 95 % interval (``<metric>_ci``, ``null`` with
-one seed), ``n`` the rows averaged and ``failed`` the seeds whose row failed.
+mean over the seeds' ``ok`` rows that have a value, its Student-t 95 % interval
+(``<metric>_ci``, ``null`` with fewer than two values; on log-scale figures a lower end at or
+below 0 is not drawn), ``n`` the ``ok`` rows and ``failed`` the seeds whose row failed.
 """
 
 from __future__ import annotations

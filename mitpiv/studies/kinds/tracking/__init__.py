@@ -26,12 +26,13 @@ Experiment file (paths relative to it; ``mitpiv schema --kind tracking`` lists e
 
 Stages: ``field`` (seeding and advection, :func:`mitpiv.physics.sequence.advect_sequence`;
 one PLY per frame and the truth in the one truth format, with identities, velocities and
-accelerations), ``sensor`` (with a ``[sensor]`` table: counts per camera and frame,
-:func:`mitpiv.studies.shared.sensor_stage`; every later stage reads them less the black level,
-:func:`~mitpiv.studies.kinds.tracking.scoring.tracked_images`), ``render`` (EXR per camera and frame through
+accelerations), ``render`` (EXR per camera and frame through
 :func:`mitpiv.render.render.render_scene`, the renderer of the tomo kind; chunks of frames in
 this process or, with ``[render] workers > 1``, on a local Dask cluster of processes, as
-``mitpiv sweep`` runs its points), ``calibrate`` (the cameras: the rendered images' own
+``mitpiv sweep`` runs its points), ``sensor`` (with a ``[sensor]`` table: counts per camera
+and frame, :func:`mitpiv.studies.shared.sensor_stage`; the otf and track stages and the
+``[compare]`` methods read them less the black level,
+:func:`~mitpiv.studies.kinds.tracking.scoring.tracked_images`), ``calibrate`` (the cameras: the rendered images' own
 models, or pinhole fits to a virtual calibration target, :func:`mitpiv.reconstruct.calibration.calibrate`),
 ``otf`` (:func:`mitpiv.tracking.otf.calibrate_otf` from particles triangulated in the
 images), ``track`` (:func:`mitpiv.tracking.stb.stb`; a sequence shorter than four frames is
@@ -220,6 +221,23 @@ class TrackingTable(Table):
     reduced_loops: Annotated[int, Field(ge=0, le=5)] = Field(1, description="IPR loops with one camera left out")
     regularise_window: Annotated[int, Field(ge=0, le=50)] = Field(
         3, description="half window of the track regularisation [frames] (0: none, then no velocities)")
+    # the dense-sequence rules of mitpiv.tracking.stb.stb (issue 51, docs/guide.md "Dense sequences")
+    predict_points: Annotated[int, Field(ge=4, le=50)] = Field(
+        8, description="a track predicts from up to this many of its last positions (a line through 4-5, a "
+                       "parabola through 6 or more; 4: the parabola through the last 4)")
+    back_shake: bool = Field(True, description="start tracks also from pairs of untracked particles of the last "
+                                               "two frames, extended two frames back by shaking")
+    capped_residual: bool = Field(True, description="the residual IPR searches subtracts each tracked particle at "
+                                                    "most at its track's median intensity of its last 6 frames")
+    camera_gain: bool = Field(True, description="every shake uses the per-camera gain IPR measures on frame 0")
+    track_gain: bool = Field(True, description="with camera_gain: the gain measured again on every frame from the "
+                                               "tracks at least 6 frames old")
+    link_from_tracks: bool = Field(True, description="new chains start from the nearest tracks' median velocity")
+    frame_threshold: bool = Field(True, description="the residual's IPR detects against the frame's own threshold")
+    joint_check: bool = Field(False, description="test tracks after the joint shake with the residual's particles")
+    track_support: Annotated[float, Field(ge=0, lt=1)] = Field(
+        0.0, description="with joint_check: end tracks whose particle some camera supports below this fraction "
+                         "(0: off)")
 
     @model_validator(mode="after")
     def _bounds(self):
@@ -543,7 +561,10 @@ def track_images(sequence, cameras, otf, *, dt_s: float, lower_mm, upper_mm, tra
         return stb(sequence, cameras, otf, dt_s=dt_s, lower_mm=lower_mm, upper_mm=upper_mm, search_px=t.search_px,
                    predict_px=t.predict_px, max_shake_px=t.max_shake_px, velocity_guess=t.velocity_guess_mm_s,
                    shake_iterations=t.shake_iterations, min_intensity=t.min_intensity, ipr_options=opts,
-                   regularise_window=t.regularise_window, progress=progress)
+                   regularise_window=t.regularise_window, predict_points=t.predict_points, back_shake=t.back_shake,
+                   capped_residual=t.capped_residual, camera_gain=t.camera_gain, track_gain=t.track_gain,
+                   link_from_tracks=t.link_from_tracks, frame_threshold=t.frame_threshold,
+                   joint_check=t.joint_check, track_support=t.track_support, progress=progress)
     res = [ipr(imgs, cameras, otf, lower_mm=lower_mm, upper_mm=upper_mm, min_intensity=t.min_intensity, **opts)
            for imgs in sequence]
     n = sum(len(r) for r in res)

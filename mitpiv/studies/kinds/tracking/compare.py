@@ -241,7 +241,7 @@ def stage_openlpt(ctx: StageContext) -> dict:
     from mitpiv.errors import MitpivError
     from mitpiv.io import write_npz
     from mitpiv.io.openlpt import export_openlpt
-    from mitpiv.studies.shared import run_images
+    from mitpiv.studies.shared import frame_files, source_of
     from mitpiv.tracking.peers import run_openlpt
 
     cfg, run, c = ctx.cfg, ctx.run_dir, ctx.cfg.compare
@@ -255,9 +255,9 @@ def stage_openlpt(ctx: StageContext) -> dict:
         t0 = time.perf_counter()
         if cfg.sensor is not None and cfg.sensor.black_level:  # the counts less the black level, as STB reads them
             per_frame = [tracked_images(cfg, run, f) for f in range(cfg.sequence.frames)]
-            frames = [[fr[k] for fr in per_frame] for k in range(len(cams))]
-        else:
-            frames = run_images(run)["files"]
+        else:  # the files of the stage this experiment reads (not a folder a former setting left)
+            per_frame = [frame_files(run, f, source_of(cfg)) for f in range(cfg.sequence.frames)]
+        frames = [[fr[k] for fr in per_frame] for k in range(len(cams))]
         export_openlpt(folder, frames, cams, lower_mm=lo, upper_mm=hi,
                        frame_rate_hz=1.0 / cfg.flow.dt_s, voxel_mm=vox, settings=settings, threads=c.openlpt_threads,
                        undistort=distorted, progress=ctx.progress)
@@ -347,7 +347,10 @@ def stage_tomo(ctx: StageContext) -> dict:
                        what=f"[compare] tomo_windows = {list(c.tomo_windows)}, tomo_overlap = {c.tomo_overlap}",
                        fix="use a smaller overlap or larger windows")
     tw = time.perf_counter()
-    _warm_up(tracked_images(cfg, run, 0), maps, grid, c.tomo_method)
+    def volume_images(f):  # MART takes no negative pixel: counts less the black level clipped at 0
+        return [np.maximum(i, 0.0) for i in tracked_images(cfg, run, f)]
+
+    _warm_up(volume_images(0), maps, grid, c.tomo_method)
     warm_s = time.perf_counter() - tw
     t0 = time.perf_counter()
     cache = WeightCache()
@@ -356,7 +359,7 @@ def stage_tomo(ctx: StageContext) -> dict:
     prev = None
     for f in range(pairs + 1):
         ta = time.perf_counter()
-        vol, inf = reconstruct_volume(tracked_images(cfg, run, f), maps, grid, c.tomo_method,
+        vol, inf = reconstruct_volume(volume_images(f), maps, grid, c.tomo_method,
                                       iterations=c.tomo_iterations, progress=ctx.progress, cache=cache)
         recon_s += time.perf_counter() - ta
         if inf.get("residuals"):

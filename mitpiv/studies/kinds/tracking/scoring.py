@@ -27,7 +27,8 @@ def load_cameras(run: Path) -> list:
 def tracked_images(cfg, run: Path, frame: int) -> list[np.ndarray]:
     """The images of one frame that the trackers read: the ``sensor`` stage's counts less the
     black level when the experiment has a ``[sensor]`` table (a camera's background
-    subtraction), else the rendered radiance."""
+    subtraction; a dark-current offset stays in), else the rendered radiance. Read or shot
+    noise leaves negative pixels; MART's callers clip them at 0."""
     imgs, _ = frame_images(run, frame, source_of(cfg))
     if cfg.sensor is not None and cfg.sensor.black_level:
         imgs = [i - float(cfg.sensor.black_level) for i in imgs]
