@@ -295,7 +295,7 @@ def _write_report(rows, summary, figures, path) -> None:
              "|---|---|---|---|---|---|---|---|---|---|"]
     for e in sorted(summary, key=lambda e: (e.get("ppp") or 0.0, e["method"])):
         lines.append(f"| {_fmt(e.get('ppp'), 'g')} | {e['method']} | {e['n']} | {len(e['failed'])} | "
-                     f"{_ci(e, 'yield', '.3f')} | {_ci(e, 'ghost_fraction', '.3f')} | "
+                     f"{_ci(e, 'yield', '.3f')} | {_ci(e, 'ghost_fraction', '.4f')} | "
                      f"{_ci(e, 'position_error_px', '.3f')} | {_ci(e, 'velocity_error', '.4f')} | "
                      f"{_ci(e, 'acceleration_error', '.3f')} | {_ci(e, 'wall_per_frame_s', '.2f')} |")
     lines += ["", "## Every run", "",
