@@ -6,7 +6,9 @@ OpenLPT is an optional benchmark dependency (``pip install mitpiv[peers]``: PyPI
 whose C++ core is the module ``pyopenlpt``). It runs in a child process
 (``python -c "import pyopenlpt; pyopenlpt.run('config.txt')"`` in the export folder): its C++
 core prints to the terminal and can abort the process on a bad input, which must not take the
-caller down; its log is kept as ``openlpt.log`` in the folder.
+caller down; its log is kept as ``openlpt.log`` in the folder. The child dies with its caller
+(:func:`run_python_child`: its own process group, killed on a timeout or an exception, and
+``PR_SET_PDEATHSIG`` on Linux when the caller is killed outright).
 
 What OpenLPT gives: positions per frame per track (``results/ConvergeTrack/*.csv``); no
 velocities. The tracks returned are its long tracks (active, inactive and exited; the
@@ -71,6 +73,46 @@ def openlpt_tracks(folder, *, n_frames: int, dt_s: float, regularise: bool = Tru
     return smooth(t) if regularise else t
 
 
+# Run first in the child: ask the kernel to SIGKILL it when the thread that started it dies
+# (prctl PR_SET_PDEATHSIG = 1, Linux), and exit if that parent is already gone (the race
+# between fork and prctl). Elsewhere the prctl call is skipped and the process group below
+# still covers a timeout or an exception in the parent.
+_CHILD_PRELUDE = """\
+import os, signal, sys
+if sys.platform.startswith("linux"):
+    import ctypes
+    ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))
+    if os.getppid() != int(os.environ["MITPIV_PARENT_PID"]):
+        os._exit(1)
+"""
+
+
+def run_python_child(code: str, *, cwd, log, timeout_s: float) -> int:
+    """Run ``code`` in a child Python process (its own process group) and return its exit status.
+
+    The child and anything it starts die with the caller: on a timeout
+    (:class:`subprocess.TimeoutExpired`, re-raised) or any exception in the caller, including
+    ``KeyboardInterrupt``, the whole process group is killed; if the caller is killed outright
+    (a sweep's Dask worker stopped, ``kill -9``), Linux kills the child through
+    ``PR_SET_PDEATHSIG``. Without this, a killed sweep left OpenLPT running for half an hour.
+    """
+    import os
+    import signal
+
+    env = dict(os.environ, MITPIV_PARENT_PID=str(os.getpid()))
+    proc = subprocess.Popen([sys.executable, "-c", _CHILD_PRELUDE + code], cwd=cwd, stdout=log,
+                            stderr=subprocess.STDOUT, env=env, start_new_session=True)
+    try:
+        return proc.wait(timeout=timeout_s)
+    except BaseException:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.wait()
+        raise
+
+
 def run_openlpt(folder, *, timeout_s: float = 600.0, regularise: bool = True):
     """Run OpenLPT's STB on an export folder and return (tracks, wall time [s]).
 
@@ -97,14 +139,14 @@ def run_openlpt(folder, *, timeout_s: float = 600.0, regularise: bool = True):
     t0 = time.perf_counter()
     with open(folder / "openlpt.log", "w") as logf:
         try:
-            proc = subprocess.run([sys.executable, "-c", "import pyopenlpt; pyopenlpt.run('config.txt')"],
-                                  cwd=folder, stdout=logf, stderr=subprocess.STDOUT, timeout=timeout_s)
+            returncode = run_python_child("import pyopenlpt; pyopenlpt.run('config.txt')", cwd=folder, log=logf,
+                                          timeout_s=timeout_s)
         except subprocess.TimeoutExpired:
             raise BackendError(f"run_openlpt: OpenLPT ran past {timeout_s:g} s on {str(folder)!r}.") from None
     wall = time.perf_counter() - t0
     tail = (folder / "openlpt.log").read_text(errors="replace")[-800:]
-    if proc.returncode != 0 or "OpenLPT finish" not in tail:
-        raise BackendError(f"run_openlpt: OpenLPT failed on {str(folder)!r} (exit status {proc.returncode}); the "
+    if returncode != 0 or "OpenLPT finish" not in tail:
+        raise BackendError(f"run_openlpt: OpenLPT failed on {str(folder)!r} (exit status {returncode}); the "
                            f"end of its log:\n{tail}")
     log.info("OpenLPT ran in %.1f s on %s", wall, folder)
     tracks = openlpt_tracks(folder, n_frames=int(manifest["n_frames"]), dt_s=1.0 / float(manifest["frame_rate_hz"]),
