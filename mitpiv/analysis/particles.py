@@ -523,3 +523,42 @@ def match(found, truth, *, radius_mm: float | None = None, grid=None, radius_vox
     err = f[pairs[:, 0]] - t[pairs[:, 1]]
     return MatchResult(pairs, err, f.shape[0], int(tidx.size), float(radius_mm),
                        tuple(voxel_mm) if voxel_mm is not None else None, tidx, f)
+
+
+def match_nearest(found, truth, *, grid=None) -> MatchResult:
+    """Match without a search radius, by the nearest-particle rule of Fahringer & Thurow's
+    multi-plenoptic study: each found particle is given its nearest true particle, and each
+    true particle that some found particle chose keeps the nearest of them; its error is that
+    particle's position less its own. True particles no found particle chose are missed; the
+    found particles not kept are ghosts.
+
+    No gate caps the errors (a one-to-one match within ``radius_voxels`` drops every error
+    beyond the gate, so the spread of what is kept cannot exceed it); a far ghost taken as a
+    true particle's nearest counts with its whole error. Returns a :class:`MatchResult`
+    whose ``radius_mm`` is infinite.
+
+    Parameters
+    ----------
+    found : :class:`FoundParticles` or (N, 3) positions [mm]; truth : (M, 3) positions [mm].
+    grid : when given, true particles outside the grid's bounds are not counted (nor chosen).
+    """
+    from scipy.spatial import cKDTree
+
+    voxel_mm = grid.voxel_mm if grid is not None else (found.voxel_mm if isinstance(found, FoundParticles) else None)
+    f = _as_positions(found, "found")
+    t = _as_positions(truth, "truth")
+    tidx = np.arange(t.shape[0])
+    if grid is not None:
+        lo, hi = np.asarray(grid.origin_mm), np.asarray(grid.upper_mm)
+        tidx = tidx[np.all((t >= lo) & (t <= hi), axis=1)]
+    if f.shape[0] == 0 or tidx.size == 0:
+        pairs = np.zeros((0, 2), np.int64)
+    else:
+        d, j = cKDTree(t[tidx]).query(f)
+        order = np.lexsort((d, j))  # by true particle, nearest found first
+        _, first = np.unique(j[order], return_index=True)
+        keep = order[first]
+        pairs = np.stack([keep, tidx[j[keep]]], axis=1).astype(np.int64)
+    err = f[pairs[:, 0]] - t[pairs[:, 1]]
+    return MatchResult(pairs, err, f.shape[0], int(tidx.size), float("inf"),
+                       tuple(voxel_mm) if voxel_mm is not None else None, tidx, f)

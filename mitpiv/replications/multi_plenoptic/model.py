@@ -51,6 +51,8 @@ WAVELENGTH_UM = 0.532  # the paper's experiment: 532 nm laser
 SIGMA_VOXELS = 0.7  # particle Gaussian, the paper's "0.7 times the voxel diameter"
 ONE_PERCENT_RADIUS = math.sqrt(2.0 * math.log(100.0))  # sources within the 1 %-of-peak radius [sigma]
 BIT_DEPTH = 16
+#: one-to-one gates [voxels] of the z-uncertainty study beside the paper's gate-free nearest-particle rule (issue 56)
+Z_GATES_VOXELS = (3.0, 10.0, 20.0)
 
 
 def image_distance_mm(so_mm: float) -> float:
@@ -247,12 +249,14 @@ def white_weights(so_over_pm: float) -> np.ndarray:
 def fidelity(volumes, grid: VoxelGrid, truths, *, windows, radius_voxels: float = 3.0) -> dict:
     """The paper's four metrics of a reconstructed pair of frames: Q (eq. 16), Q* (eq. 17) of
     frame 0 against the Gaussian truth (sigma 0.7 voxel), the z position 95 % uncertainty
-    [voxels] (1.96 standard deviations of the z error of the nearest reconstructed particle to
-    each true one, Gaussian peak fits), and from a two-pass PIV (UOD threshold 2, outliers
+    [voxels] (1.96 standard deviations of the z error, Gaussian peak fits) of a one-to-one match
+    within ``radius_voxels`` (``z_u95_vox``), of the paper's nearest-particle rule without a gate
+    (``z_u95_vox_paper``, :func:`~mitpiv.analysis.particles.match_nearest`) and of one-to-one matches
+    within each of :data:`Z_GATES_VOXELS` (``z_u95_vox_g<gate>``), each with its detection rate, and from a two-pass PIV (UOD threshold 2, outliers
     replaced after the first pass) the RMS velocity error (eq. 18) [voxels per frame] and the
     second pass's outlier ratio."""
     from mitpiv.analysis import piv3d, velocity_error
-    from mitpiv.analysis.particles import find_particles, match
+    from mitpiv.analysis.particles import find_particles, match, match_nearest
     from mitpiv.analysis.quality import quality_q, quality_q_zero_mean, truth_volume
 
     v0, v1 = (np.asarray(v, dtype=np.float64) for v in volumes)
@@ -264,9 +268,21 @@ def fidelity(volumes, grid: VoxelGrid, truths, *, windows, radius_voxels: float 
         s = res.summary()
         out.update(z_u95_vox=s["u95_vox"][2], x_u95_vox=s["u95_vox"][0], detection_rate=s["detection_rate"],
                    ghost_fraction=s["ghost_fraction"], n_found=s["n_found"])
+        # the z uncertainty by the paper's nearest-particle rule (no gate) and by one-to-one
+        # matches within wider gates, each with its detection rate (issue 56: a 3-voxel gate caps
+        # the errors it keeps)
+        near = match_nearest(found, truths[0], grid=grid)
+        out.update(z_u95_vox_paper=float(near.u95(voxels=True)[2]), detection_paper=float(near.detection_rate))
+        for g in Z_GATES_VOXELS:
+            rg = res if g == radius_voxels else match(found, truths[0], grid=grid, radius_voxels=g)
+            out[f"z_u95_vox_g{g:g}"] = float(rg.u95(voxels=True)[2])
+            out[f"detection_g{g:g}"] = float(rg.detection_rate)
     except (ConfigError, ValueError, IndexError) as e:  # no particle found: no position metric
         log.info("fidelity: no particle statistics (%s)", e)
-        out.update(z_u95_vox=math.nan, x_u95_vox=math.nan, detection_rate=0.0, ghost_fraction=math.nan, n_found=0)
+        out.update(z_u95_vox=math.nan, x_u95_vox=math.nan, detection_rate=0.0, ghost_fraction=math.nan, n_found=0,
+                   z_u95_vox_paper=math.nan, detection_paper=0.0)
+        for g in Z_GATES_VOXELS:
+            out[f"z_u95_vox_g{g:g}"], out[f"detection_g{g:g}"] = math.nan, 0.0
     try:
         fld = piv3d(v0, v1, grid, windows=windows, overlap=0.5, threshold=2.0, replace="median", dt_s=DT_S)
         ve = velocity_error(fld, vortex_ring(), dt_s=DT_S)
