@@ -36,6 +36,7 @@ from mitpiv.reconstruct.plenoptic import (  # noqa: E402
     drt_mart,
     drt_weights,
     fuse,
+    paper_gamma_exponent,
     paper_refocus,
     paper_view_weights,
     plenoptic_volume,
@@ -51,4 +52,4 @@ from mitpiv.reconstruct.tomo import (  # noqa: E402
 )
 
 __all__ += ["VoxelGrid", "mlos", "mart", "WeightCache", "reconstruct_volume", "sapiv_refocus", "preprocess_images", "voxel_weights", "plenoptic_volume",
-            "fuse", "paper_refocus", "paper_view_weights", "drt_weights", "drt_mart"]
+            "fuse", "paper_gamma_exponent", "paper_refocus", "paper_view_weights", "drt_weights", "drt_mart"]

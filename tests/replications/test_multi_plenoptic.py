@@ -40,6 +40,8 @@ def test_quick_run_schema_and_ids(tmp_path):
     assert rows["z_unc_ratio_1cam_over_2cam"]["ours"] > 0 and z["2 plenoptic"][0] > 0
     # the optimum of each particle field's sweep, averaged over the fields
     assert 4.0 <= rows["So_pM_optimum"]["ours"] <= 16.0 and rows["So_pM_optimum"]["n"] == 2
+    r = rows["So_pM_optimum_gamma_hist"]  # the paper's histogram rule for gamma_L
+    assert 4.0 <= r["ours"] <= 16.0 and r["n"] == 2 and r["kind"] == "physics"
     # the paper's gate-free z rule, 1 camera over 2 and over 4, with an interval over the 2 fields
     for m in (2, 4):
         r = rows[f"z_ratio_nearest_1cam_over_{m}cam"]
