@@ -144,8 +144,12 @@ def _sample_lenslets(img, centres, du, order):
         yi = np.clip(np.floor(y + 0.5).astype(np.int64), -1, img.shape[0])
         ok = (xi >= 0) & (xi < img.shape[1]) & (yi >= 0) & (yi < img.shape[0])
         return np.where(ok, img[np.clip(yi, 0, img.shape[0] - 1), np.clip(xi, 0, img.shape[1] - 1)], 0.0).astype(np.float32)
-    return ndimage.map_coordinates(img, [y.ravel(), x.ravel()], order=order, mode="constant", cval=0.0,
-                                   prefilter=order > 1).reshape(x.shape).astype(np.float32)
+    out = ndimage.map_coordinates(img, [y.ravel(), x.ravel()], order=order, mode="constant", cval=0.0,
+                                  prefilter=order > 1).reshape(x.shape)
+    if order > 1:
+        # a cubic spline overshoots below 0 beside a bright lenslet image's edge: light is not negative
+        np.maximum(out, 0.0, out=out)
+    return out.astype(np.float32)
 
 
 def _grid_weights(cal: MLACalibration, s_px, t_px):
@@ -193,7 +197,8 @@ def decode(raw, calibration: MLACalibration | None = None, *, white=None, interp
     white : (H, W) array or path, optional
         White image: divides the light field (devignetting) and gives the view weights.
     interpolation : "nearest" | "linear" | "cubic"
-        Sampling of the raw image at the (sub-pixel) angular sample positions.
+        Sampling of the raw image at the (sub-pixel) angular sample positions (cubic: a
+        spline, its undershoots below zero beside bright edges clipped to 0).
     angular_oversample : int
         Angular samples per pixel (1: one per pixel across the lenslet image).
     optics : PlenopticCamera, optional

@@ -48,6 +48,11 @@ def test_quick_run_schema_and_ids(tmp_path):
         assert r["n"] == 2 and r["ci"] is not None and r["ours"] > 0 and r["kind"] == "physics"
     report = (tmp_path / "report.md").read_text()
     assert "## The z uncertainty by rule (25 deg)" in report and "one-to-one within 20 voxels" in report
+    # the whole Fig. 8-9 comparison: the cell count, 'equal' RMS with an interval, eq. 15's ablation, cubic decoding
+    cells = rows["mart_better_cells"]["ours"]
+    assert int(cells.split(" of ")[1]) >= 12 and rows["mart_better_cells"]["kind"] == "physics"
+    assert rows["rms_4cam_vs_2cam"]["n"] == 2 and rows["rms_4cam_vs_2cam"]["ci"] is not None
+    assert "none (raw eq. 14 volumes)" in report and "cubic interpolation, as the paper does" in report
     assert (tmp_path / "report.md").is_file() and (tmp_path / "fig8_Qstar_vs_angle.png").is_file()
 
 
