@@ -200,7 +200,7 @@ def _plot(rows, summary, metric, label, log, path):
 
     from mitpiv.io.figures import save_figure
 
-    fig, ax = plt.subplots(figsize=(5.0, 3.6))
+    fig, ax = plt.subplots(figsize=(7.0, 3.6))
     drawn = 0
     for method, marker in zip(("mitpiv-stb", "openlpt-stb", "mitpiv-tomo"), "osd", strict=True):
         pts = sorted((e["ppp"], e[metric], e[f"{metric}_ci"]) for e in summary if e["method"] == method
@@ -230,8 +230,8 @@ def _plot(rows, summary, metric, label, log, path):
         for ppp, name, style in PUBLISHED_LIMITS:
             ax.axvline(ppp, color="0.4", ls=style, lw=1.0, label=name)
     ax.grid(True, which="both", alpha=0.3)
-    if drawn:
-        ax.legend(fontsize=7)
+    if drawn:  # beside the axes: inside, it hid points near 0 (OpenLPT's yield)
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
     else:
         ax.text(0.5, 0.5, "no values", transform=ax.transAxes, ha="center")
     fig.tight_layout()
