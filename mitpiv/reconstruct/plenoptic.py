@@ -79,21 +79,23 @@ def plenoptic_volume(lf: LightField, grid: VoxelGrid, *, method: str = "additive
     return vol
 
 
-def paper_gamma_exponent(volume, lf: LightField, *, weights=None, sample: int = 200_000, seed: int = 0) -> float:
+def paper_gamma_exponent(volume, lf: LightField, *, weights=None, floor: float = 0.0, sample: int = 200_000,
+                         seed: int = 0) -> float:
     """The exponent ``e`` that makes ``volume ** e`` match the sub-aperture images' intensity
     histogram: Fahringer & Thurow's stated rule for eq. 14's ``gamma_L`` ("to ensure that the
     intensity histogram of the reconstruction approximately equals the histogram of the
     individual sub-aperture images").
 
-    ``volume`` is eq. 14 with ``gamma_L = 1 / sum w`` (:func:`paper_refocus`'s default); the
-    rule's ``gamma_L`` is then ``e / sum w``. Both sides are compared as distributions of
-    intensity over their maximum: the volume's voxels (those above 0) against the valid
-    samples of the views whose weight is at least half the largest (the sub-aperture images the
-    paper shows; the vignetted rim views are nearly uniformly dark). ``e`` minimises the
-    Wasserstein-1 distance between the two (:func:`scipy.stats.wasserstein_distance`, a bounded
-    scalar search over ``log e`` in [ln 0.02, ln 50]); up to ``sample`` values of each side,
-    drawn with ``seed``, enter the distance. Hand-written: no kept library states the paper's
-    rule.
+    ``volume`` is eq. 14 with ``gamma_L = 1 / sum w`` (:func:`paper_refocus`'s default, with the
+    same ``floor``); the rule's ``gamma_L`` is then ``e / sum w``. Both sides are compared as
+    distributions of intensity over their maximum, on the same footing: the reference is the
+    valid samples of the views whose weight is at least half the largest (the sub-aperture images
+    the paper shows; the vignetted rim views are nearly uniformly dark), raised to ``floor`` as
+    eq. 14 raises them; on both sides only values above 0 enter (the volume's zeros are voxels no
+    view covers, or with ``floor = 0`` voxels a dark view zeroed, and 0 stays 0 under any power).
+    ``e`` minimises the Wasserstein-1 distance between the two (:func:`scipy.stats.wasserstein_distance`,
+    a bounded scalar search over ``log e`` in [ln 0.02, ln 50]); up to ``sample`` values of each side,
+    drawn with ``seed``, enter the distance. Hand-written: no kept library states the paper's rule.
 
     Returns
     -------
@@ -102,6 +104,8 @@ def paper_gamma_exponent(volume, lf: LightField, *, weights=None, sample: int = 
     from scipy.optimize import minimize_scalar
     from scipy.stats import wasserstein_distance
 
+    if not (np.isfinite(floor) and floor >= 0):
+        raise ConfigError(f"paper_gamma_exponent: 'floor' must be finite and >= 0, got {floor!r}.")
     v = np.asarray(volume, dtype=np.float64).ravel()
     v = v[np.isfinite(v) & (v > 0)]
     w = lf.view_weights if weights is None else np.asarray(weights, dtype=np.float64)
@@ -111,9 +115,9 @@ def paper_gamma_exponent(volume, lf: LightField, *, weights=None, sample: int = 
         raise ConfigError("paper_gamma_exponent: the volume has no positive voxel or the light field no weighted "
                           "view; give eq. 14's volume of an image with particles and the light field it came from.")
     views = lf.data[w >= 0.5 * w.max()]  # (k, n_t, n_s)
-    r = views[:, lf.valid].astype(np.float64).ravel()
-    r = r[np.isfinite(r)]
-    if r.size == 0 or r.max() <= 0:
+    r = np.maximum(views[:, lf.valid].astype(np.float64).ravel(), floor)
+    r = r[np.isfinite(r) & (r > 0)]
+    if r.size == 0:
         raise ConfigError("paper_gamma_exponent: the sub-aperture images are dark; nothing to match.")
     rng = np.random.default_rng(seed)
     v = rng.choice(v, sample, replace=False) if v.size > sample else v

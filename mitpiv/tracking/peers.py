@@ -90,26 +90,40 @@ if sys.platform.startswith("linux"):
 def run_python_child(code: str, *, cwd, log, timeout_s: float) -> int:
     """Run ``code`` in a child Python process (its own process group) and return its exit status.
 
-    The child and anything it starts die with the caller: on a timeout
-    (:class:`subprocess.TimeoutExpired`, re-raised) or any exception in the caller, including
-    ``KeyboardInterrupt``, the whole process group is killed; if the caller is killed outright
-    (a sweep's Dask worker stopped, ``kill -9``), Linux kills the child through
-    ``PR_SET_PDEATHSIG``. Without this, a killed sweep left OpenLPT running for half an hour.
+    The child dies with the caller: on a timeout (:class:`subprocess.TimeoutExpired`,
+    re-raised) or any exception in the caller, including ``KeyboardInterrupt``, the child's
+    whole process group (the child and anything it started) is killed and reaped; if the caller
+    is killed outright (a sweep's Dask worker stopped, ``kill -9``), Linux kills the child
+    itself through ``PR_SET_PDEATHSIG`` (its own children, if any, are not covered; OpenLPT
+    starts none). Without this, a killed sweep left OpenLPT running for half an hour.
     """
     import os
     import signal
 
+    def kill(proc):
+        try:
+            if hasattr(os, "killpg"):
+                os.killpg(proc.pid, signal.SIGKILL)
+            else:  # no process groups (Windows): the child alone
+                proc.kill()
+        except (ProcessLookupError, PermissionError):
+            pass
+
     env = dict(os.environ, MITPIV_PARENT_PID=str(os.getpid()))
-    proc = subprocess.Popen([sys.executable, "-c", _CHILD_PRELUDE + code], cwd=cwd, stdout=log,
-                            stderr=subprocess.STDOUT, env=env, start_new_session=True)
+    proc = None
     try:
+        proc = subprocess.Popen([sys.executable, "-c", _CHILD_PRELUDE + code], cwd=cwd, stdout=log,
+                                stderr=subprocess.STDOUT, env=env, start_new_session=True)
         return proc.wait(timeout=timeout_s)
     except BaseException:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        proc.wait()
+        if proc is not None:
+            kill(proc)
+            while True:  # reap it, even through a second Ctrl-C
+                try:
+                    proc.wait()
+                    break
+                except KeyboardInterrupt:
+                    kill(proc)
         raise
 
 

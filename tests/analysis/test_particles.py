@@ -281,8 +281,11 @@ def test_match_nearest_is_the_papers_rule_and_has_no_gate():
     truth = rng.uniform((0.3, 0.3, 0.3), (2.9, 2.9, 1.7), (300, 3))
     found = np.vstack([truth[:250] + rng.normal(0, 0.01, (250, 3)),  # 50 true particles missed
                        rng.uniform((0, 0, 0), (3.2, 3.2, 2.0), (120, 3))])  # ghosts
-    outside = np.array([[50.0, 50.0, 50.0]])
+    # a true particle just outside the grid, nearer to a found one than its own true particle: not counted, not chosen
+    outside = np.array([[found[0, 0], found[0, 1], -0.004]])
+    found[0, 2] = 0.001
     r = match_nearest(found, np.vstack([truth, outside]), grid=GRID)
+    assert truth.shape[0] not in r.pairs[:, 1]
     best = {}
     for i, q in enumerate(found):
         d = np.linalg.norm(truth - q, axis=1)

@@ -129,6 +129,16 @@ def test_gamma_exponent_matches_the_sub_aperture_histogram():
     assert paper_gamma_exponent(vol, lf, weights=w) == pytest.approx(3.0, rel=1e-3)
     assert paper_gamma_exponent(vol**0.5, lf, weights=w) == pytest.approx(6.0, rel=1e-3)
     assert paper_gamma_exponent(vol * 7.0, lf, weights=w) == pytest.approx(3.0, rel=1e-3)  # scale-free
+    # dark samples (0) and uncovered voxels (0): eq. 14's floor raises the samples to it (0.3
+    # here, inside the light field's 0.2-1 range); the zero voxels are left out; the rule then
+    # recovers e0 whatever their share (with the zeros counted on one side only it read 4.7-14)
+    dark = lf.data.copy()
+    dark[:, :, ::3, :] = 0.0
+    lf.data[:] = dark
+    ref = np.maximum(lf.data[w >= 0.5][:, lf.valid].astype(np.float64).ravel(), 0.3)
+    vol = np.concatenate([(ref / ref.max()) ** (1.0 / 3.0), np.zeros(ref.size // 2)])
+    assert paper_gamma_exponent(vol, lf, weights=w, floor=0.3) == pytest.approx(3.0, rel=1e-3)
+    assert abs(paper_gamma_exponent(vol, lf, weights=w, floor=0.0) / 3.0 - 1.0) > 0.05  # the floor matters
     with pytest.raises(ConfigError, match="weights"):
         paper_gamma_exponent(vol, lf, weights=np.ones((2, 2)))
     with pytest.raises(ConfigError, match="no positive voxel"):
