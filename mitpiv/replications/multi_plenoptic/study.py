@@ -616,18 +616,23 @@ _OPEN_SECTION = (
 )
 
 
+def _mean_ci(x, digits: int) -> str:
+    """'mean [lo, hi]' of the finite values (their Student-t 95 % interval; the mean alone for one)."""
+    from mitpiv.replications.frame import interval
+
+    x = [v for v in x if math.isfinite(v)]
+    if not x:
+        return "–"
+    ci = interval(x)
+    return f"{np.mean(x):.{digits}f}" + (f" [{ci[0]:.{digits}f}, {ci[1]:.{digits}f}]" if ci else "")
+
+
 def _z_rule_section(sc: dict, samples) -> str:
     """The z uncertainty at 25 deg by the paper's nearest-particle rule and by one-to-one matches
     within 3, 10 and 20 voxels, with the detection rate of each (mean and 95 % interval over the
     particle fields)."""
-    from mitpiv.replications.frame import interval
-
     def cell(x):
-        x = [v for v in x if math.isfinite(v)]
-        if not x:
-            return "–"
-        ci = interval(x)
-        return f"{np.mean(x):.2f}" + (f" [{ci[0]:.2f}, {ci[1]:.2f}]" if ci else "")
+        return _mean_ci(x, 2)
 
     rules = [("the paper's nearest-particle rule (no gate)", "z_u95_vox_paper", "detection_paper")]
     rules += [(f"one-to-one within {g:g} voxels", f"z_u95_vox_g{g:g}", f"detection_g{g:g}") for g in S_GATES]
@@ -651,14 +656,8 @@ def _z_rule_section(sc: dict, samples) -> str:
 def _norm_section(sc: dict, samples, interp) -> str:
     """Eq. 15's normalisation ablated for the 2 -> 4 camera gain in Q*, and the light field's
     interpolation (the paper's cubic against linear) on one camera."""
-    from mitpiv.replications.frame import interval
-
     def stat(x):
-        x = [v for v in x if math.isfinite(v)]
-        if not x:
-            return "–"
-        ci = interval(x)
-        return f"{np.mean(x):.3f}" + (f" [{ci[0]:.3f}, {ci[1]:.3f}]" if ci else "")
+        return _mean_ci(x, 3)
 
     lines = ["| eq. 15 normalisation | Q*, 2 cameras | Q*, 4 cameras | gain 2 -> 4 |", "|---|---|---|---|"]
     for norm, lab in (("", "histogram (max(V - mu, 0) / sigma of a normal fit; ours)"), ("/none", "none (raw eq. 14 volumes)")):
