@@ -70,19 +70,25 @@ def test_a_timeout_kills_the_child(tmp_path):
     assert _gone(_pid(tmp_path))
 
 
-def test_an_interrupt_in_the_caller_kills_the_child(tmp_path):
-    """A KeyboardInterrupt (Ctrl-C on a sweep) raised in the caller while it waits."""
-    import threading
+def test_an_interrupt_in_the_caller_kills_the_child(tmp_path, monkeypatch):
+    """A KeyboardInterrupt (Ctrl-C on a sweep) arriving while the caller waits: simulated by
+    the wait raising it once the child runs (a real SIGINT reaches only the main thread, and
+    pytest-xdist or a Dask worker may run the caller in another one)."""
+    orig_wait = subprocess.Popen.wait
+    raised = []
 
-    def interrupt():
-        _pid(tmp_path)
-        signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+    def interrupted_wait(self, timeout=None):
+        if timeout is not None and not raised:
+            _pid(tmp_path)  # the child is running
+            raised.append(True)
+            raise KeyboardInterrupt
+        return orig_wait(self, timeout=timeout)
 
-    threading.Thread(target=interrupt, daemon=True).start()
+    monkeypatch.setattr(subprocess.Popen, "wait", interrupted_wait)
     t0 = time.monotonic()
     with open(tmp_path / "log", "w") as log, pytest.raises(KeyboardInterrupt):
         run_python_child(SLEEPER, cwd=tmp_path, log=log, timeout_s=110)
-    assert time.monotonic() - t0 < 60
+    assert raised and time.monotonic() - t0 < 60
     assert _gone(_pid(tmp_path))
 
 
