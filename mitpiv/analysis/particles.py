@@ -489,6 +489,20 @@ def assign(a, b, radius: float, *, tiebreak=None) -> np.ndarray:
     return np.column_stack([row[real][order], col[real][order]]).astype(np.int64)
 
 
+def _match_inputs(found, truth, grid):
+    """The matchers' inputs: the voxel size (the grid's, else the found particles'; None), the
+    found and true positions, and the indices of the true particles inside the grid (all
+    without one)."""
+    voxel_mm = grid.voxel_mm if grid is not None else (found.voxel_mm if isinstance(found, FoundParticles) else None)
+    f = _as_positions(found, "found")
+    t = _as_positions(truth, "truth")
+    tidx = np.arange(t.shape[0])
+    if grid is not None:
+        lo, hi = np.asarray(grid.origin_mm), np.asarray(grid.upper_mm)
+        tidx = tidx[np.all((t >= lo) & (t <= hi), axis=1)]
+    return voxel_mm, f, t, tidx
+
+
 def match(found, truth, *, radius_mm: float | None = None, grid=None, radius_voxels: float = 2.0) -> MatchResult:
     """Match found particles to the truth one-to-one within a search radius.
 
@@ -505,19 +519,12 @@ def match(found, truth, *, radius_mm: float | None = None, grid=None, radius_vox
     The assignment minimises the summed distance over the largest set of pairs within
     the radius (see :func:`assign`); the remaining found particles are ghosts.
     """
-    voxel_mm = grid.voxel_mm if grid is not None else (found.voxel_mm if isinstance(found, FoundParticles) else None)
-    f = _as_positions(found, "found")
-    t = _as_positions(truth, "truth")
+    voxel_mm, f, t, tidx = _match_inputs(found, truth, grid)
     if radius_mm is None:
         if voxel_mm is None:
             raise ConfigError("match: give radius_mm, or a grid (radius_voxels times its voxel size).")
         radius_mm = check_positive("radius_voxels", radius_voxels, owner="match") * max(voxel_mm)
     radius_mm = check_positive("radius_mm", radius_mm, owner="match", unit="mm")
-    tidx = np.arange(t.shape[0])
-    if grid is not None:
-        lo, hi = np.asarray(grid.origin_mm), np.asarray(grid.upper_mm)
-        inside = np.all((t >= lo) & (t <= hi), axis=1)
-        tidx = tidx[inside]
     pairs = assign(f, t[tidx], radius_mm)
     pairs[:, 1] = tidx[pairs[:, 1]]
     err = f[pairs[:, 0]] - t[pairs[:, 1]]
@@ -544,13 +551,7 @@ def match_nearest(found, truth, *, grid=None) -> MatchResult:
     """
     from scipy.spatial import cKDTree
 
-    voxel_mm = grid.voxel_mm if grid is not None else (found.voxel_mm if isinstance(found, FoundParticles) else None)
-    f = _as_positions(found, "found")
-    t = _as_positions(truth, "truth")
-    tidx = np.arange(t.shape[0])
-    if grid is not None:
-        lo, hi = np.asarray(grid.origin_mm), np.asarray(grid.upper_mm)
-        tidx = tidx[np.all((t >= lo) & (t <= hi), axis=1)]
+    voxel_mm, f, t, tidx = _match_inputs(found, truth, grid)
     if f.shape[0] == 0 or tidx.size == 0:
         pairs = np.zeros((0, 2), np.int64)
     else:
