@@ -521,9 +521,19 @@ def _imports_of(name: str, f: Path) -> set[str]:
     return {m for m in out if _module_file(m) is not None}
 
 
+def _dynamic_imports(name: str, f: Path) -> set[str]:
+    """Modules ``name`` imports by name at run time, which the static closure cannot see: the
+    Mitsuba plugins that :mod:`mitpiv.render.plugins` loads with ``importlib`` (every module
+    of that package)."""
+    if name != "mitpiv.render.plugins":
+        return set()
+    return {f"{name}.{p.stem}" for p in f.parent.glob("*.py") if p.name != "__init__.py"}
+
+
 def code_modules(module: str) -> list[str]:
     """The mitpiv modules a study's points run: the static import closure of ``module``
-    (every ``import`` in the source, also inside functions), without the frame itself."""
+    (every ``import`` in the source, also inside functions), with the Mitsuba plugins a
+    render loads (:func:`_dynamic_imports`) and their imports, without the frame itself."""
     seen: set[str] = set()
     todo = [module]
     while todo:
@@ -534,7 +544,7 @@ def code_modules(module: str) -> list[str]:
         if f is None:
             continue
         seen.add(m)
-        todo.extend(_imports_of(m, f) - seen)
+        todo.extend((_imports_of(m, f) | _dynamic_imports(m, f)) - seen)
     return sorted(seen)
 
 

@@ -297,6 +297,11 @@ def test_the_real_studies_hash_their_image_models():
     mods = replication.code_modules("mitpiv.replications.sapiv_distortion.study")
     assert {"mitpiv.replications.sapiv_distortion.model", "mitpiv.reconstruct.sapiv", "mitpiv.analysis.quality"} <= set(mods)
     assert "mitpiv.replications.frame" not in mods  # the writer's changes do not invalidate points
+    # a study that renders hashes the Mitsuba plugins its renders load by name (importlib), and their imports
+    mods = replication.code_modules("mitpiv.replications.multi_plenoptic.study")
+    assert {"mitpiv.render.plugins.plenoptic", "mitpiv.render.plugins.distorted_pinhole",
+            "mitpiv.render.plugins.mie_phase", "mitpiv.render.plugins.tracer_particles",
+            "mitpiv.physics.mie"} <= set(mods)
 
 
 def test_reclassify_rewrites_earlier_results_without_computing(toy, tmp_path, monkeypatch):

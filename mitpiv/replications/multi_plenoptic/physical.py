@@ -7,7 +7,7 @@ sensors with Table 1's main lens (10 mm, 5 mm pupil) and lenslets (14 um, f/2, 2
 sensor of 1.4 um pixels), ``distorted_pinhole`` standard cameras with the same lens at f/2 or
 f/20 (a thin lens focused on the volume, the Fourier-optics diffraction PSF at the working
 f-number), 2 um particles of index 1.45 scattering by Lorenz-Mie theory, lit through the
-volume's thickness by a top-hat sheet travelling along +x. Each camera point of this arm
+volume's thickness (times :data:`SHEET_MARGIN`) by a top-hat sheet travelling along +x. Each camera point of this arm
 loads the scene with the point's distance, angle and azimuth, checks that the rendered
 sensor is the model arm's camera (:func:`check_pose`), renders the two frames of the model
 arm's particle field of the same seed, and records them through :func:`sensor`.
@@ -28,7 +28,8 @@ What changes against the paper's image model:
   values clipped at zero as a user's dark-frame subtraction does) and 16 bits. The paper
   names no camera; the two sensors (:func:`sensor`) are ours: the same technology for both
   pixel sizes (quantum efficiency 0.6, read noise 2.5 e-, a full well of 2300 e- per um^2 of
-  pixel: 4,500 e- for 1.4 um, 450,000 e- for 14 um, 16 bits spanning the well).
+  pixel: 4,500 e- for 1.4 um, 450,000 e- for 14 um, 16 bits spanning the well, less a black
+  level of 1000 counts).
 * **The exposure** is one number of photons per watt for every camera and configuration
   (:data:`EXPOSURE_PER_W`), set once (from renders of the 25 deg pair at 96 x 96 lenslets,
   seeds 3 and 4, before any point of this arm was scored) so that the brightest plenoptic
@@ -41,7 +42,7 @@ What changes against the paper's image model:
 The rendered counts go through the model arm's own chain: decoding with the model's
 :class:`~mitpiv.physics.plenoptic.PlenopticCamera` (cubic), eq. 14 with the same white-image
 weights and floor, eq. 15 or MART on the standard cameras with the mapping the model arm
-calibrates for the same camera. Optionally the same render is also recorded without noise
+calibrates for the same camera (the same targets and seed). Optionally the same render is also recorded without noise
 or quantisation (``no_sensor``: the light each pixel collects, in counts), so the report can
 tell what the optics change from what the sensor changes.
 """
@@ -74,6 +75,9 @@ PROXY_RADIUS_MM = 0.005
 #: camera's brightest pixel at 1.5-2.0e-10 W (96 x 96 lenslets, 25 deg, 2 um particles) -> 3,000-3,900
 #: photons, 1,800-2,300 e- of its 4,500 e- well
 EXPOSURE_PER_W = 2.0e13
+#: the top-hat sheet's thickness over the volume's: the model arm's particles are all seen in both
+#: frames, and frame 1's particles advected out of the volume's thickness (2.3 % at S_o/p_M = 4) stay lit
+SHEET_MARGIN = 1.5
 #: the sensors' technology (ours; the paper names no camera)
 QE = 0.6
 READ_NOISE_E = 2.5
@@ -114,7 +118,7 @@ def scene_hash() -> str:
 def scene_params(kind: str, so_over_pm: float, thickness_ratio: float, n_lenslets: int, angle_deg: float,
                  azimuth_deg: float) -> dict:
     """The ``$name`` substitutions of :data:`SCENE` for one camera: sensor ``plen0`` or
-    ``pin0`` at the point's distance, angle and azimuth, the crop, the sheet as thick as the
+    ``pin0`` at the point's distance, angle and azimuth, the crop, the sheet SHEET_MARGIN times as thick as the
     volume, and for a standard camera its f-number written for ``distorted_pinhole``'s thin
     lens (a pinhole at the image distance with the 5 mm / N pupil; the scene's comment)."""
     from mitpiv.replications.multi_plenoptic import model as S
@@ -123,7 +127,7 @@ def scene_params(kind: str, so_over_pm: float, thickness_ratio: float, n_lenslet
     si = S.image_distance_mm(so)
     _, _, full_w = S.volume_box(so_over_pm, thickness_ratio, n_lenslets)
     p = {"lenslets": n_lenslets, "resolution": 10 * n_lenslets, "pin_resolution": n_lenslets,
-         "focus_distance_mm": f"{so:.9g}", "thickness_mm": f"{full_w * thickness_ratio:.9g}",
+         "focus_distance_mm": f"{so:.9g}", "thickness_mm": f"{SHEET_MARGIN * full_w * thickness_ratio:.9g}",
          "elevation_deg": f"{90.0 - angle_deg:.9g}", "az0": f"{azimuth_deg:.9g}", "rays_per_particle": RAYS}
     if kind != "plen":
         fnum = float(kind[1:])
@@ -133,27 +137,60 @@ def scene_params(kind: str, so_over_pm: float, thickness_ratio: float, n_lenslet
     return p
 
 
-def check_pose(sensor_obj, model_camera, kind: str) -> None:
-    """Refuse a rendered sensor that is not the model arm's camera: a plenoptic sensor's
-    to-world matrix within 1e-5 mm of the model's (float32 poses), a standard camera's
-    projection of the volume's corners within 1e-3 px."""
-    from mitpiv.render.render import sensor_model
+def _differences(a, b, path: str = "") -> list[str]:
+    """The entries of two camera records (nested dicts / lists of numbers and strings) that
+    differ: numbers beyond a relative 1e-6, anything else when unequal."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return [d for k in sorted(set(a) | set(b)) for d in _differences(a.get(k), b.get(k), f"{path}.{k}".lstrip("."))]
+    if isinstance(a, list | tuple) and isinstance(b, list | tuple) and len(a) == len(b):
+        return [d for i, (x, y) in enumerate(zip(a, b, strict=True)) for d in _differences(x, y, f"{path}[{i}]")]
+    if isinstance(a, int | float) and isinstance(b, int | float) and not isinstance(a, bool):
+        return [] if abs(a - b) <= 1e-6 * max(abs(a), abs(b), 1e-12) else [f"{path}: {a!r} vs {b!r}"]
+    return [] if a == b else [f"{path}: {a!r} vs {b!r}"]
 
+
+def check_pose(sensor_obj, model_camera, kind: str, *, so_over_pm: float | None = None) -> None:
+    """Refuse a rendered sensor that is not the model arm's camera. Plenoptic: every entry of
+    the two cameras' records (main lens, lenslets, sensor, crop) within a relative 1e-6, the
+    rotation within 1e-6 and the position within 1e-6 of its distance (float32 poses: about
+    1e-7). Standard: the projections of an 8 x 8 x 4 mm box about the origin within 1e-3 px,
+    the same resolution, and (with ``so_over_pm``) the thin lens's f-number relative to the
+    image distance, the focus distance and the diffraction f-number and magnification those of
+    the model's lens."""
+    problems: list[str] = []
+    cam = sensor_obj.camera
     if kind == "plen":
-        rec = sensor_model(sensor_obj)
-        d = float(np.max(np.abs(np.asarray(rec["to_world_mitsuba"]) - np.asarray(model_camera.to_world_mitsuba))))
-        same = d < 1e-5 * max(1.0, float(np.max(np.abs(model_camera.to_world_mitsuba))))
-        what = f"to-world matrices differ by {d:.3g}"
+        a, b = cam.to_dict(), model_camera.to_dict()
+        a.pop("to_world_mitsuba", None)
+        b.pop("to_world_mitsuba", None)
+        problems = _differences(a, b)
+        m1, m2 = np.asarray(cam.to_world_mitsuba, float), np.asarray(model_camera.to_world_mitsuba, float)
+        dr = float(np.max(np.abs(m1[:3, :3] - m2[:3, :3])))
+        dt = float(np.max(np.abs(m1[:3, 3] - m2[:3, 3])))
+        if dr > 1e-6 or dt > 1e-6 * max(1.0, float(np.linalg.norm(m2[:3, 3]))):
+            problems.append(f"pose: rotation differs by {dr:.3g}, position by {dt:.3g} mm")
     else:
-        c = np.array([[x, y, z] for x in (-2, 2) for y in (-2, 2) for z in (-1, 1)], float)
-        cam = sensor_obj.camera
+        c = np.array([[x, y, z] for x in (-4, 4) for y in (-4, 4) for z in (-2, 2)], float)
         d = float(np.max(np.abs(cam.project(c) - model_camera.project(c))))
-        same = tuple(cam.resolution) == tuple(model_camera.resolution) and d < 1e-3
-        what = f"projections differ by {d:.3g} px (resolution {tuple(cam.resolution)} vs {tuple(model_camera.resolution)})"
-    if not same:
+        if tuple(cam.resolution) != tuple(model_camera.resolution) or d > 1e-3:
+            problems.append(f"projections differ by {d:.3g} px (resolution {tuple(cam.resolution)} vs "
+                            f"{tuple(model_camera.resolution)})")
+        if so_over_pm is not None:
+            from mitpiv.render.render import sensor_model
+            from mitpiv.replications.multi_plenoptic import model as S
+
+            so = so_over_pm * S.MAIN_APERTURE_MM
+            fnum = float(kind[1:])
+            rec = sensor_model(sensor_obj)
+            want = {"f_number": S.image_distance_mm(so) * fnum / S.MAIN_FOCAL_MM, "focus_distance_mm": so,
+                    "psf": {"f_number": fnum, "magnification": S.MAIN_FOCAL_MM / (so - S.MAIN_FOCAL_MM)}}
+            got = {"f_number": rec.get("f_number"), "focus_distance_mm": rec.get("focus_distance_mm"),
+                   "psf": {k: (rec.get("psf") or {}).get(k) for k in ("f_number", "magnification")}}
+            problems += _differences(got, want)
+    if problems:
         raise ConfigError(f"multi-plenoptic physical arm: sensor {sensor_obj.id()!r} of {SCENE} is not the model arm's "
-                          f"camera ({what}); the scene and model.plenoptic_camera / standard_camera must describe the "
-                          "same system.")
+                          f"camera ({'; '.join(problems[:4])}); the scene and model.plenoptic_camera / standard_camera "
+                          "must describe the same system.")
 
 
 def render_camera(kind: str, so_over_pm: float, thickness_ratio: float, n_lenslets: int, angle_deg: float,
@@ -185,7 +222,7 @@ def render_camera(kind: str, so_over_pm: float, thickness_ratio: float, n_lensle
             scene = load_scene(xml, frame=k, params=params)
             sens = {s.id(): s for s in scene.sensors()}[sid]
             if rec is None:
-                check_pose(sens, model_cam, kind)
+                check_pose(sens, model_cam, kind, so_over_pm=so_over_pm)
                 rec = sensor_model(sens)
             t1 = time.perf_counter()
             imgs.append(render_sensor(scene, sens, seed=seed, frame=k))
