@@ -56,6 +56,7 @@ def test_quick_run_schema_and_ids(tmp_path):
     assert all(r["n"] == 2 for r in pb.values() if r["kind"] == "physics")
     assert "(arm physical)" in report.splitlines()[0]
     assert "## What physically based images change" in report and "| Mitsuba + sensor |" in report
+    assert "## Fig. 7 per gamma_L rule and arm" in report and "| optimum of the means |" in report
     assert len(res["curves"]["pb_Qstar_vs_cameras"]["y"]) == 3
     for lab, ys in res["curves"]["Qstar_vs_So_pM_arms"]["y"].items():
         assert all(y is not None and 0.0 < y < 1.0 for y in ys), lab
