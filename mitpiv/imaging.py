@@ -56,14 +56,14 @@ import math
 import numbers
 import warnings
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
 
 from mitpiv.errors import ConfigError, MitpivWarning, check_positive
 
-__all__ = ["SensorModel", "SensorSetResult", "apply_sensor", "apply_sensor_set", "resolve_exposure", "resolve_photometry",
+__all__ = ["SensorModel", "SensorSetResult", "noise_free", "apply_sensor", "apply_sensor_set", "resolve_exposure", "resolve_photometry",
            "degenerate_counts",
            "convolve_psf", "decimated_convolve", "sensor_mean_variance", "PointPSFTable", "splat_points", "point_images"]
 
@@ -331,6 +331,13 @@ def apply_sensor(image, model: SensorModel | None = None, *, seed: int = 0, scen
                           f">= its maximum {own!r}, got {scene_peak!r}.")
     exposure, noise_peak = resolve_exposure(m, scene_peak, wavelength_nm=wavelength_nm)
     return _counts(img, m, np.random.default_rng(seed), exposure, noise_peak)
+
+
+def noise_free(model: SensorModel) -> SensorModel:
+    """``model`` without photon, read or dark noise, black level, full well or quantisation: the
+    light each pixel collects at the same exposure, in counts (what the optics alone deliver)."""
+    return replace(model, shot_noise=False, read_noise_e=0.0, dark_current_e_per_s=0.0, black_level=0.0,
+                   gaussian_noise_percent=0.0, bit_depth=None, full_well_e=None)
 
 
 @dataclass(frozen=True)

@@ -53,12 +53,12 @@ import math
 import shutil
 import tempfile
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from mitpiv.errors import ConfigError
+from mitpiv.imaging import noise_free
 
 __all__ = ["SCENE", "RAYS", "DIAMETER_UM", "EXPOSURE_PER_W", "sensor", "noise_free", "scene_hash", "check_pose",
            "scene_params", "render_camera", "record"]
@@ -98,13 +98,6 @@ def sensor(kind: str, so_over_pm: float):
     return SensorModel(exposure=EXPOSURE_PER_W * (so_over_pm / 8.0) ** 2, photometry="aperture",
                        quantum_efficiency=QE, shot_noise=True, read_noise_e=READ_NOISE_E, full_well_e=well,
                        gain_e_per_count=well / (2**BIT_DEPTH - 1), black_level=BLACK_LEVEL, bit_depth=BIT_DEPTH)
-
-
-def noise_free(model):
-    """``model`` without photon or read noise, black level, well or quantisation: the light
-    each pixel collects at the same exposure, in counts."""
-    return replace(model, shot_noise=False, read_noise_e=0.0, dark_current_e_per_s=0.0, black_level=0.0,
-                   gaussian_noise_percent=0.0, bit_depth=None, full_well_e=None)
 
 
 def scene_hash() -> str:

@@ -355,6 +355,12 @@ def _count(items) -> dict:
     return out
 
 
+def _finite_mean(x) -> float:
+    """The mean of the finite values (NaN when there is none)."""
+    x = [v for v in x if math.isfinite(v)]
+    return float(np.mean(x)) if x else math.nan
+
+
 def _argmax(xs, ys):
     """The x of the largest finite y (NaN when no y is finite)."""
     ys = [(-math.inf if (y is None or not math.isfinite(y)) else y) for y in ys]
@@ -408,8 +414,7 @@ def run(ctx) -> ReplicationResult:
 
     def get(method="eq14", so=BASE_SO, ratio=BASE_RATIO, ppp=BASE_PPP, angle=BASE_ANGLE, m=2, q="Qstar"):
         """The point's mean over its realisations with a value (NaN when none has one)."""
-        x = [v for v in samples(method, so, ratio, ppp, angle, m, q) if math.isfinite(v)]
-        return float(np.mean(x)) if x else math.nan
+        return _finite_mean(samples(method, so, ratio, ppp, angle, m, q))
 
     def first(method="eq14", so=BASE_SO, ratio=BASE_RATIO, ppp=BASE_PPP, angle=BASE_ANGLE, m=2, q="Qstar"):
         """The point's first realisation (NaN when it has none)."""
@@ -638,7 +643,7 @@ def run(ctx) -> ReplicationResult:
                               max(abs(a - b) / a for _, a, b in low) if low else math.nan,
                               bool(low) and all(abs(a - b) < 0.1 * a for _, a, b in low), tolerance="every ppp <= 0.1"))
     # ---------------------------------------------------------------- the physically based arm
-    pb_rows, pb_curves, pb_section = _physical_arm(sc, samples, C, cam_items)
+    pb_rows, pb_curves, pb_section = _physical_arm(sc, samples, first, C, cam_items)
     rows.extend(pb_rows)
     curves.update(pb_curves)
     # ---------------------------------------------------------------- figures
@@ -702,7 +707,7 @@ def _info(row: Row, why: str) -> Row:
     return replace(row, kind="info", why=why)
 
 
-def _physical_arm(sc: dict, samples, C, cam_items):
+def _physical_arm(sc: dict, samples, first, C, cam_items):
     """The physically based arm's rows, curves and report section (issue 56, item 5): the first
     ``pb_seeds`` particle fields of Fig. 7 (1:4, one camera on the axis) and of the camera
     numbers at 25 deg, rendered by Mitsuba and recorded by a sensor
@@ -717,18 +722,14 @@ def _physical_arm(sc: dict, samples, C, cam_items):
     def pbs(method=pb, **a):
         return samples(method=method, **a)
 
-    def mean(x):
-        x = [v for v in x if math.isfinite(v)]
-        return float(np.mean(x)) if x else math.nan
-
+    mean = _finite_mean
     rows, curves = [], {}
     so_list = list(sc["so_pm"])
     angles, swept = list(sc["angles"]), set(sc["cams_all_angles"])
 
     def at(a, method="eq14", m=2, q="Qstar"):
         """The paper-model arm's first particle field at angle ``a`` (NaN when not computed)."""
-        x = samples(method=method, angle=a, m=m, q=q)
-        return x[0] if x else math.nan
+        return first(method=method, angle=a, m=m, q=q)
 
     def sweep(fn, need) -> dict:
         """``{angle: fn(angle)}`` over the model arm's Fig. 8 sweep when it has the cameras ``need``."""
@@ -900,8 +901,7 @@ def _fig7_section(sc: dict, samples) -> str:
         lines.append(f"| {so:g} | " + " | ".join(_mean_ci(vals[(c[0], so)], 3) for c in cols) + " |")
     best = []
     for lab, _, _ in cols:
-        means = [float(np.mean([v for v in vals[(lab, so)] if math.isfinite(v)])) if any(
-            math.isfinite(v) for v in vals[(lab, so)]) else math.nan for so in so_list]
+        means = [_finite_mean(vals[(lab, so)]) for so in so_list]
         best.append(f"{_argmax(so_list, means):g}")
     lines.append("| optimum of the means | " + " | ".join(best) + " |")
     n_m = len(samples(method="eq14", so=so_list[0], angle=0.0, m=1))

@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from mitpiv.errors import ConfigError
+from mitpiv.imaging import noise_free
 
 __all__ = ["SCENE", "SENSOR", "render_field", "physical_point", "sensor_counts", "noise_free", "scene_hash"]
 
@@ -147,15 +148,6 @@ def sensor_counts(imgs, ids, records, *, seed: int, model=None) -> tuple[list[np
             "sum_counts": [float(np.sum(c)) for c in counts],
             "saturated_fraction": float(np.mean([np.mean(c >= top) for c in raw]))}
     return counts, info
-
-
-def noise_free(model):
-    """``model`` without photon or read noise, black level or quantisation: the light each pixel
-    collects at the same exposure, in counts."""
-    from dataclasses import replace
-
-    return replace(model, shot_noise=False, read_noise_e=0.0, dark_current_e_per_s=0.0, black_level=0.0,
-                   gaussian_noise_percent=0.0, bit_depth=None, full_well_e=None)
 
 
 def physical_point(system, cameras, mappings, *, distortion_percent: float, spherical_waves: float,
