@@ -91,7 +91,9 @@ class SplashModel:
 
     @property
     def we(self) -> float:
-        return self.rho_kg_m3 * self.v_m_s**2 * self.d_mm * 1e-3 / self.sigma_n_m
+        from mitpiv.physics.drop_impact import weber
+
+        return float(weber(self.d_mm, self.v_m_s, rho_kg_m3=self.rho_kg_m3, sigma_n_m=self.sigma_n_m))
 
     @property
     def la(self) -> float:
