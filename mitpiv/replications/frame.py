@@ -59,7 +59,7 @@ from mitpiv.errors import ConfigError
 from mitpiv.progress import Progress, bar
 
 __all__ = ["Row", "Kind", "Curve", "Study", "ReplicationContext", "ReplicationResult", "compare_value",
-           "compare_trend", "interval", "verdict", "classify_rows", "unused_kinds", "tally", "tally_line", "code_hash",
+           "compare_trend", "interval", "Pooled", "pooled_bootstrap", "verdict", "classify_rows", "unused_kinds", "tally", "tally_line", "code_hash",
            "code_modules", "replicate", "reclassify", "get_study", "list_studies", "write_outputs", "RESULTS_KEYS",
            "KINDS", "ARMS", "VERDICTS"]
 
@@ -229,6 +229,53 @@ def interval(samples: Sequence[float], *, method: str = "t", level: float = CI_L
     raise ConfigError(f"interval: method {method!r} is not 't' or 'bootstrap'.")
 
 
+@dataclass(frozen=True)
+class Pooled:
+    """A statistic pooled over ``n`` independent realisations (a model error's s.d. over every
+    matched pair of every impact, as a paper pools its image pairs) with its 95 % interval
+    ``ci`` from resampling the realisations (:func:`pooled_bootstrap`): pass it as ``ours``
+    of :func:`compare_value` where the per-realisation values are too few to stand alone."""
+
+    value: float
+    ci: tuple[float, float] | None
+    n: int
+
+
+def pooled_bootstrap(groups: Sequence, statistic, *, level: float = CI_LEVEL, n_resamples: int = 999,
+                     seed: int = 0):
+    """``statistic(groups)`` (a float, or a dict of floats, from a list of realisations' data)
+    and its ``level`` percentile interval from resampling the realisations with replacement
+    (``n_resamples`` draws of their indices from a seeded generator: the same data give the
+    same interval; every key of a dict shares the draws). Returns a :class:`Pooled`, or a
+    dict of them. An interval is None below two realisations, or when fewer than half of the
+    resamples give a finite value; non-finite resamples are dropped. Hand-written because
+    scipy.stats.bootstrap resamples values, not groups of them with one statistic over all."""
+    import numpy as np
+
+    groups = list(groups)
+    value = statistic(groups)
+    many = isinstance(value, Mapping)
+    values = {k: float(v) for k, v in value.items()} if many else {"": float(value)}
+    n = max(len(groups), 1)
+    draws: dict[str, list[float]] = {k: [] for k in values}
+    if len(groups) >= 2:
+        rng = np.random.default_rng(seed)
+        for row in rng.integers(0, len(groups), size=(int(n_resamples), len(groups))):
+            got = statistic([groups[i] for i in row])
+            for k in values:
+                draws[k].append(float(got[k] if many else got))
+    out = {}
+    for k, v in values.items():
+        d = np.asarray(draws[k], dtype=np.float64)
+        good = d[np.isfinite(d)]
+        ci = None
+        if math.isfinite(v) and d.size and good.size >= 0.5 * d.size:
+            lo, hi = np.quantile(good, [0.5 - level / 2, 0.5 + level / 2])
+            ci = (float(lo), float(hi))
+        out[k] = Pooled(v, ci, n)
+    return out if many else out[""]
+
+
 def verdict(lo: float, hi: float, band_lo: float, band_hi: float) -> str:
     """Compare an interval ``[lo, hi]`` of ours with the paper's band ``[band_lo, band_hi]``
     (either end may be infinite: a one-sided claim such as '< 0.75' or '> 0').
@@ -270,7 +317,14 @@ def _samples(id: str, ours) -> tuple[list[float], bool]:
 
 
 def _judge(id: str, ours, band_lo: float, band_hi: float, ci_method: str) -> dict:
-    """ours (one value or realisations) against a band: the Row fields ours, verdict, ci, n."""
+    """ours (one value, realisations or a :class:`Pooled`) against a band: the Row fields ours,
+    verdict, ci, n."""
+    if isinstance(ours, Pooled):
+        if not math.isfinite(ours.value):
+            return {"ours": None, "verdict": "disagrees", "ci": None, "n": ours.n, "extra": "no finite value"}
+        lo, hi = ours.ci if ours.ci is not None else (ours.value, ours.value)
+        return {"ours": ours.value, "verdict": verdict(lo, hi, band_lo, band_hi), "ci": ours.ci, "n": ours.n,
+                "extra": "", "method": "pooled bootstrap"}
     vals, many = _samples(id, ours)
     n = len(vals)
     if not all(math.isfinite(v) for v in vals):
@@ -280,7 +334,8 @@ def _judge(id: str, ours, band_lo: float, band_hi: float, ci_method: str) -> dic
     mean = sum(vals) / n
     ci = interval(vals, method=ci_method) if n >= 2 else None
     lo, hi = ci if ci is not None else (mean, mean)
-    return {"ours": mean, "verdict": verdict(lo, hi, band_lo, band_hi), "ci": ci, "n": n, "extra": ""}
+    return {"ours": mean, "verdict": verdict(lo, hi, band_lo, band_hi), "ci": ci, "n": n, "extra": "",
+            "method": ci_method}
 
 
 def compare_value(id: str, quantity: str, paper_source: str, paper: float, ours, *, unit: str = "",
@@ -291,12 +346,13 @@ def compare_value(id: str, quantity: str, paper_source: str, paper: float, ours,
 
     Parameters
     ----------
-    ours : float or sequence of float
+    ours : float, sequence of float or Pooled
         One value, or the values of independent realisations (seeds, patches, particle
         fields): then ``ours`` is their mean, ``ci`` its 95 % interval (``ci_method``) and
         the verdict compares the interval with the band (:func:`verdict`); one value is
-        judged as a point (``n = 1``, no interval). A non-finite value (or realisation)
-        never agrees (and ``ours`` is written as null).
+        judged as a point (``n = 1``, no interval); a :class:`Pooled` statistic brings its
+        own interval (``ci_method`` "pooled bootstrap"). A non-finite value (or
+        realisation) never agrees (and ``ours`` is written as null).
     rel, abs : float
         The relative and absolute tolerances (at least one). ``why`` says where the
         tolerance comes from (the paper's reading precision, ...); it is appended to the
@@ -316,7 +372,7 @@ def compare_value(id: str, quantity: str, paper_source: str, paper: float, ours,
     note = "; ".join(s for s in (note, j["extra"]) if s)
     return Row(id=id, quantity=quantity, paper_source=paper_source, paper=paper_f, ours=_finite_or_none(j["ours"]),
                unit=unit, tolerance=text, verdict=j["verdict"], note=note, kind=kind, arm=arm, ci=j["ci"], n=j["n"],
-               ci_method=ci_method if j["ci"] is not None else "", reads=tuple(reads))
+               ci_method=j.get("method", ci_method) if j["ci"] is not None else "", reads=tuple(reads))
 
 
 def compare_trend(id: str, quantity: str, paper_source: str, paper: str, ours, agrees: bool | None = None, *,

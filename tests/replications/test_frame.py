@@ -274,6 +274,40 @@ def test_intervals_and_the_three_valued_verdict():
     assert r.verdict == "disagrees" and r.ours is None and "1 of 3 realisation(s)" in r.note
 
 
+def test_a_pooled_statistic_carries_its_interval_from_resampling_the_realisations():
+    """pooled_bootstrap: the s.d. of 25 draws of N(0, 0.3) in each of 20 realisations, pooled
+    (500 values). The pooled s.d.'s own standard error is 0.3 / sqrt(2 * 499) = 0.0095, so the
+    95 % interval should be about 4 of them wide (0.037; accepted 0.02-0.06) and hold 0.3
+    within +-3 standard errors of its centre; seeded, so the same data give the same interval.
+    Passed as ``ours``, it decides the verdict with that interval."""
+    import numpy as np
+
+    from mitpiv.replications.frame import Pooled, pooled_bootstrap
+
+    rng = np.random.default_rng(11)
+    groups = [rng.normal(0.0, 0.3, 25) for _ in range(20)]
+
+    def pooled_sd(gs):
+        return float(np.std(np.concatenate(gs), ddof=1))
+
+    p = pooled_bootstrap(groups, pooled_sd)
+    lo, hi = p.ci
+    assert p.n == 20 and p.value == pytest.approx(pooled_sd(groups), rel=1e-12)
+    assert 0.02 < hi - lo < 0.06 and lo < p.value < hi and abs(0.5 * (lo + hi) - 0.3) < 3 * 0.0095
+    assert pooled_bootstrap(groups, pooled_sd) == p
+    # a dict statistic: every key shares the resamples
+    both = pooled_bootstrap(groups, lambda gs: {"sd": pooled_sd(gs), "twice": 2 * pooled_sd(gs)})
+    assert both["sd"] == p and both["twice"].ci == pytest.approx((2 * lo, 2 * hi), rel=1e-12)
+    r = compare_value("sd", "sd", "s", 0.3, p, rel=0.2)
+    assert (r.verdict, r.n, r.ci, r.ci_method) == ("agrees", 20, p.ci, "pooled bootstrap")
+    assert compare_value("sd", "sd", "s", 0.45, p, rel=0.1).verdict == "disagrees"
+    # one realisation: no interval, judged as a point; a non-finite statistic never agrees
+    one = pooled_bootstrap(groups[:1], pooled_sd)
+    assert one.ci is None and compare_value("sd", "sd", "s", 0.3, one, rel=0.2).ci is None
+    r = compare_value("sd", "sd", "s", 0.3, Pooled(float("nan"), None, 20), rel=0.2)
+    assert r.verdict == "disagrees" and r.ours is None
+
+
 def test_the_code_hash_follows_the_modules_a_point_imports(tmp_path, monkeypatch):
     pkg = tmp_path / "mitpiv"
     (pkg / "sub").mkdir(parents=True)
