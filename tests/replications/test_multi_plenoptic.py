@@ -210,6 +210,34 @@ def test_physical_arm_collects_light_through_each_pupil(tmp_path):
         P.check_pose(sensor, S.plenoptic_camera(8.0, 25.0, 90.0, 24), "plen")
 
 
+def test_the_physical_scene_builds_at_every_distance_of_the_sweep(tmp_path):
+    """Every sensor of the scene is built for every point, so a plenoptic point's unused
+    standard cameras need a lens at every S_o / p_M of the full sweep (the scene's defaults,
+    S_o = 40 mm, are no lens at S_o = 12.5 mm: the full run once stopped there); a standard
+    camera's own point is refused by name where its pinhole form cannot exist."""
+    import shutil
+
+    import numpy as np
+
+    from mitpiv.errors import ConfigError
+    from mitpiv.io.particles import write_particles_ply
+    from mitpiv.render.scene import load_scene
+    from mitpiv.replications.multi_plenoptic import physical as P
+    from mitpiv.replications.multi_plenoptic.study import _scale
+
+    shutil.copyfile(P.SCENE, tmp_path / "scene.xml")
+    write_particles_ply(tmp_path / "particles_0.ply", np.zeros((1, 3)), 2.0, proxy_radius_mm=0.005)
+    for so in _scale(False)["so_pm"]:
+        sc = load_scene(tmp_path / "scene.xml", frame=0, params=P.scene_params("plen", so, 0.25, 24, 25.0, 0.0))
+        assert {s.id(): s for s in sc.sensors()}["plen0"].camera.focus_distance_mm == pytest.approx(so * 5.0, rel=1e-6)
+    # a standard camera is written as a pinhole at its image distance: S_o must exceed 2 f
+    for kind in ("f2", "f20"):
+        sc = load_scene(tmp_path / "scene.xml", frame=0, params=P.scene_params(kind, 8.0, 0.25, 24, 25.0, 0.0))
+        assert {s.id(): s for s in sc.sensors()}["pin0"].camera.focus_distance_mm == pytest.approx(40.0, rel=1e-6)
+        with pytest.raises(ConfigError, match="S_o / p_M = 4"):
+            P.scene_params(kind, 4.0, 0.25, 24, 25.0, 0.0)
+
+
 def test_scene_is_the_papers_system():
     """scenes/multiplenoptic_paper (the Mitsuba version of the study) carries Table 1 and
     S_o / p_M = 8 exactly, and its cropped experiment validates."""

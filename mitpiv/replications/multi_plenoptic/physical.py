@@ -113,7 +113,8 @@ def scene_params(kind: str, so_over_pm: float, thickness_ratio: float, n_lenslet
     """The ``$name`` substitutions of :data:`SCENE` for one camera: sensor ``plen0`` or
     ``pin0`` at the point's distance, angle and azimuth, the crop, the sheet SHEET_MARGIN times as thick as the
     volume, and for a standard camera its f-number written for ``distorted_pinhole``'s thin
-    lens (a pinhole at the image distance with the 5 mm / N pupil; the scene's comment)."""
+    lens (a pinhole at the image distance with the 5 mm / N pupil; the scene's comment); for
+    a plenoptic point the unused standard cameras get a lens that images S_o."""
     from mitpiv.replications.multi_plenoptic import model as S
 
     so = so_over_pm * S.MAIN_APERTURE_MM
@@ -122,7 +123,15 @@ def scene_params(kind: str, so_over_pm: float, thickness_ratio: float, n_lenslet
     p = {"lenslets": n_lenslets, "resolution": 10 * n_lenslets, "pin_resolution": n_lenslets,
          "focus_distance_mm": f"{so:.9g}", "thickness_mm": f"{SHEET_MARGIN * full_w * thickness_ratio:.9g}",
          "elevation_deg": f"{90.0 - angle_deg:.9g}", "az0": f"{azimuth_deg:.9g}", "rays_per_particle": RAYS}
-    if kind != "plen":
+    if kind == "plen":
+        # every sensor of the scene is built: the unused standard cameras get a lens that images
+        # S_o (the scene's defaults, S_o = 40 mm, are no lens at S_o < 13.3 mm)
+        p.update(pin_image_distance_mm=f"{0.5 * so:.9g}")
+    else:
+        if si >= so:
+            raise ConfigError(f"scene_params: a standard camera at S_o / p_M = {so_over_pm:g} (S_o {so:g} mm) has its "
+                              f"image distance {si:g} mm >= S_o, which distorted_pinhole's pinhole-at-the-image-distance "
+                              "form cannot write (it needs S_o > 2 f, S_o / p_M > 4); place it farther.")
         fnum = float(kind[1:])
         p.update(pinhole_f_number=f"{fnum:.9g}", pin_image_distance_mm=f"{si:.9g}",
                  pin_image_f_number=f"{si / (S.MAIN_FOCAL_MM / fnum):.9g}",
